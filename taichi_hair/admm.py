@@ -1,0 +1,353 @@
+"""ADMM stage kernels of Algorithm 1 (Daviet 2023), contacts excepted.
+
+Each kernel is one stage; ``solver_admm.SolverADMM.step`` sequences them.
+Arguments read as dataflow: model groups, state, scalars, outputs.
+
+Units: the incremental problem is written in energy units [J], so the
+position system has entries in N/m (mass/dt^2, W_y) and right-hand sides in N;
+the twist system has entries in J (per rad^2) and right-hand sides in J.
+"""
+
+import taichi as ti
+
+from .elasticity import strand_frame
+from .strains import pair_kappa, pair_twist_derivatives, stretch_strain, vec6
+
+vec3 = ti.math.vec3
+
+
+# --------------------------------------------------------------------------- begin / end of step
+@ti.kernel
+def begin_step(
+    dynamic: ti.template(),
+    vertex: ti.template(),
+    edge: ti.template(),
+    body_rotation: ti.template(),
+    body_translation: ti.template(),
+    strand: ti.template(),
+    vs: ti.template(),
+    es: ti.template(),
+    buf: ti.template(),
+    dt: float,
+):
+    """Store x^t, v^t, theta^t, omega^t; advect the initial guess (Algorithm 1, line 2); move roots.
+
+    Kinematic vertices go straight to the body transform of the end of the
+    step: x = R_b x_body + T_b.
+    """
+    for i in vs.vertex_position:
+        x = vs.vertex_position[i]
+        v = vs.vertex_velocity[i]
+        buf.vertex_position_begin[i] = x
+        buf.vertex_velocity_begin[i] = v
+        if vertex.vertex_is_fixed[i] != 0:
+            b = strand.strand_body[vertex.vertex_strand[i]]
+            vs.vertex_position[i] = body_rotation[b] @ vertex.vertex_body_position[i] + body_translation[b]
+        elif ti.static(dynamic):
+            vs.vertex_position[i] = x + dt * v
+        th = es.edge_twist[i]
+        om = es.edge_angular_velocity[i]
+        buf.edge_twist_begin[i] = th
+        buf.edge_angular_velocity_begin[i] = om
+        if ti.static(dynamic):
+            if edge.edge_is_fixed[i] == 0:
+                es.edge_twist[i] = th + dt * om
+
+
+@ti.kernel
+def end_step(dynamic: ti.template(), vs: ti.template(), es: ti.template(), buf: ti.template(), dt: float):
+    """Backward Euler velocities v = (x - x^t)/dt, omega = (theta - theta^t)/dt (zero if quasistatic)."""
+    for i in vs.vertex_position:
+        if ti.static(dynamic):
+            vs.vertex_velocity[i] = (vs.vertex_position[i] - buf.vertex_position_begin[i]) / dt
+            es.edge_angular_velocity[i] = (es.edge_twist[i] - buf.edge_twist_begin[i]) / dt
+        else:
+            vs.vertex_velocity[i] = vec3(0.0)
+            es.edge_angular_velocity[i] = 0.0
+
+
+@ti.kernel
+def restore_begin(vs: ti.template(), es: ti.template(), buf: ti.template()):
+    """Undo a failed step: copy the begin-of-step state back."""
+    for i in vs.vertex_position:
+        vs.vertex_position[i] = buf.vertex_position_begin[i]
+        vs.vertex_velocity[i] = buf.vertex_velocity_begin[i]
+        es.edge_twist[i] = buf.edge_twist_begin[i]
+        es.edge_angular_velocity[i] = buf.edge_angular_velocity_begin[i]
+
+
+# --------------------------------------------------------------------------- strains
+@ti.kernel
+def compute_strains(
+    measure: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    x: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+    out_kappa: ti.template(),
+    out_strain: ti.template(),
+):
+    """kappa_i for every pair and eps_j for every edge at the current configuration."""
+    for i in x:
+        if pair.pair_is_active[i] != 0:
+            a = i - 1
+            twist = theta[i] - theta[a] + es.edge_reference_twist[i]
+            out_kappa[i] = pair_kappa(
+                measure,
+                es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a],
+                es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i],
+                twist,
+            )
+        else:
+            out_kappa[i] = vec3(0.0)
+        eps = 0.0
+        if edge.edge_rest_length[i] > 0.0:
+            eps, grad = stretch_strain(measure, x[i + 1] - x[i], edge.edge_rest_length[i])
+        out_strain[i] = eps
+
+
+# --------------------------------------------------------------------------- duals
+@ti.kernel
+def update_duals(
+    use_q: ti.template(),
+    vertex: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    buf: ti.template(),
+):
+    """lambda_y <- lambda_y + Q^T (y - Bx) (Algorithm 1; scaled dual, stored in the root frame)."""
+    for i in x:
+        if pair.pair_is_active[i] != 0:
+            ea = x[i] - x[i - 1]
+            eb = x[i + 1] - x[i]
+            y = buf.pair_y[i]
+            Rt = strand_frame(strand, body_rotation, vertex.vertex_strand[i], use_q).transpose()
+            ra = Rt @ vec3(y[0] - ea[0], y[1] - ea[1], y[2] - ea[2])
+            rb = Rt @ vec3(y[3] - eb[0], y[4] - eb[1], y[5] - eb[2])
+            buf.pair_dual[i] += vec6(ra[0], ra[1], ra[2], rb[0], rb[1], rb[2])
+
+
+@ti.kernel
+def reset_duals(buf: ti.template()):
+    for i in buf.pair_dual:
+        buf.pair_dual[i] = vec6(0.0)
+
+
+# --------------------------------------------------------------------------- global step (Sec. 4.3)
+@ti.func
+def pair_residual_force(pair: ti.template(), strand: ti.template(), body_rotation: ti.template(),
+                        vertex: ti.template(), x: ti.template(), buf: ti.template(), p: int, use_q: ti.template()):
+    """r_p = W_y,p (lambda_p + y_p - (Bx)_p) in world coordinates, as two 3-vectors [N]."""
+    lam = buf.pair_dual[p]
+    R = strand_frame(strand, body_rotation, vertex.vertex_strand[p], use_q)
+    la = R @ vec3(lam[0], lam[1], lam[2])
+    lb = R @ vec3(lam[3], lam[4], lam[5])
+    y = buf.pair_y[p]
+    w = buf.pair_admm_weight[p]
+    ra = w * (la + vec3(y[0], y[1], y[2]) - (x[p] - x[p - 1]))
+    rb = w * (lb + vec3(y[3], y[4], y[5]) - (x[p + 1] - x[p]))
+    return ra, rb
+
+
+@ti.kernel
+def assemble_position_system(
+    dynamic: ti.template(),
+    use_q: ti.template(),
+    vertex: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    buf: ti.template(),
+    gravity: vec3,
+    air_velocity: vec3,
+    air_viscosity: float,
+    dt: float,
+):
+    """Assemble M_hat dx = f_hat of Eq. (3); the same tridiagonal matrix serves the three axes.
+
+    M = d2E_e/dx2 + W_z + B^T W_y B, f = -dE_e/dx + W_z (...) + B^T W_y (lambda_y + y - Bx).
+    B^T W_y B is an edge Laplacian whose edge weight is the sum of the weights
+    of the (one or two) pairs containing the edge.  Kinematic vertices get an
+    identity row and no coupling (the projections Pi_A of Eq. 3).
+    """
+    for i in x:
+        if vertex.vertex_is_fixed[i] != 0:
+            buf.tri_lower[i] = 0.0
+            buf.tri_diag[i] = 1.0
+            buf.tri_upper[i] = 0.0
+            buf.tri_rhs3[i] = vec3(0.0)
+        else:
+            m = vertex.vertex_mass[i]
+            diag = 0.0
+            f = m * gravity
+            if ti.static(dynamic):
+                inv_dt = 1.0 / dt
+                diag += m * inv_dt * inv_dt
+                x_pred = buf.vertex_position_begin[i] + dt * buf.vertex_velocity_begin[i]
+                f -= m * inv_dt * inv_dt * (x[i] - x_pred)
+                xi = air_viscosity * vertex.vertex_voronoi_length[i]
+                diag += xi * inv_dt
+                f -= xi * ((x[i] - buf.vertex_position_begin[i]) * inv_dt - air_velocity)
+            # Edge (i-1, i): weight from pairs i-1 and i.
+            lower = 0.0
+            if vertex.vertex_local_index[i] > 0:
+                we = buf.pair_admm_weight[i - 1] * pair.pair_is_active[i - 1] + buf.pair_admm_weight[i] * pair.pair_is_active[i]
+                diag += we
+                if vertex.vertex_is_fixed[i - 1] == 0:
+                    lower = -we
+            upper = 0.0
+            if edge.edge_rest_length[i] > 0.0:
+                we = buf.pair_admm_weight[i] * pair.pair_is_active[i] + buf.pair_admm_weight[i + 1] * pair.pair_is_active[i + 1]
+                diag += we
+                if vertex.vertex_is_fixed[i + 1] == 0:
+                    upper = -we
+            # B^T r: vertex i gets ra_i - rb_i from its own pair, rb_{i-1}, -ra_{i+1}.
+            if pair.pair_is_active[i] != 0:
+                ra, rb = pair_residual_force(pair, strand, body_rotation, vertex, x, buf, i, use_q)
+                f += ra - rb
+            if vertex.vertex_local_index[i] > 0:
+                if pair.pair_is_active[i - 1] != 0:
+                    ra, rb = pair_residual_force(pair, strand, body_rotation, vertex, x, buf, i - 1, use_q)
+                    f += rb
+            if edge.edge_rest_length[i] > 0.0:
+                if pair.pair_is_active[i + 1] != 0:
+                    ra, rb = pair_residual_force(pair, strand, body_rotation, vertex, x, buf, i + 1, use_q)
+                    f -= ra
+            buf.tri_lower[i] = lower
+            buf.tri_diag[i] = diag
+            buf.tri_upper[i] = upper
+            buf.tri_rhs3[i] = f
+
+
+@ti.kernel
+def apply_position_update(vertex: ti.template(), x: ti.template(), buf: ti.template()):
+    """x <- x + dx for free vertices (the solution sits in tri_rhs3)."""
+    for i in x:
+        if vertex.vertex_is_fixed[i] == 0:
+            x[i] += buf.tri_rhs3[i]
+
+
+# --------------------------------------------------------------------------- twist step
+@ti.kernel
+def compute_pair_twist_terms(
+    measure: ti.template(),
+    vertex: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+    buf: ti.template(),
+    damping_scale: float,
+):
+    """Per pair: gradient and Hessian of E_b,i (+ damping) with respect to (theta_{i-1}, theta_i).
+
+    The exact Hessian J^T K J + (K (kappa - rest)) . d2 kappa is used when it is
+    positive semi-definite, its Gauss-Newton part otherwise, so the assembled
+    system stays SPD far from rest.
+    """
+    for i in theta:
+        if pair.pair_is_active[i] != 0:
+            a = i - 1
+            m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
+            m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
+            twist = theta[i] - theta[a] + es.edge_reference_twist[i]
+            kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
+            dk_a, dk_b, d2_aa, d2_bb, d2_ab = pair_twist_derivatives(measure, kappa, m1a, m2a, ta, m1b, m2b, tb)
+            c = strand.strand_damping_time[vertex.vertex_strand[i]] * damping_scale
+            k = buf.pair_bend_stiffness[i]
+            gk = k * ((kappa - buf.pair_rest_kappa[i]) + c * (kappa - buf.pair_kappa_begin[i]))
+            h_aa = (1.0 + c) * (k * dk_a).dot(dk_a)
+            h_bb = (1.0 + c) * (k * dk_b).dot(dk_b)
+            h_ab = (1.0 + c) * (k * dk_a).dot(dk_b)
+            e_aa = h_aa + gk.dot(d2_aa)
+            e_bb = h_bb + gk.dot(d2_bb)
+            e_ab = h_ab + gk.dot(d2_ab)
+            if e_aa >= 0.0 and e_bb >= 0.0 and e_aa * e_bb - e_ab * e_ab >= 0.0:
+                h_aa, h_bb, h_ab = e_aa, e_bb, e_ab
+            buf.pair_twist_hessian[i] = vec3(h_aa, h_bb, h_ab)
+            buf.pair_twist_gradient[i] = ti.math.vec2(gk.dot(dk_a), gk.dot(dk_b))
+
+
+@ti.kernel
+def assemble_twist_system(
+    dynamic: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    theta: ti.template(),
+    buf: ti.template(),
+    dt: float,
+):
+    """Newton system d2E/dtheta2 dtheta = -dE/dtheta (+ rotational inertia), tridiagonal over edges.
+
+    Edge j is the second edge of pair j and the first edge of pair j+1.
+    Kinematic twists (clamped root edge, ghost edge) get identity rows.
+    """
+    for j in theta:
+        if edge.edge_is_fixed[j] != 0:
+            buf.tri_lower[j] = 0.0
+            buf.tri_diag[j] = 1.0
+            buf.tri_upper[j] = 0.0
+            buf.tri_rhs1[j] = 0.0
+        else:
+            diag = 0.0
+            g = 0.0
+            lower = 0.0
+            upper = 0.0
+            if pair.pair_is_active[j] != 0:
+                h = buf.pair_twist_hessian[j]
+                diag += h[1]
+                g += buf.pair_twist_gradient[j][1]
+                if edge.edge_is_fixed[j - 1] == 0:
+                    lower = h[2]
+            if pair.pair_is_active[j + 1] != 0:
+                h = buf.pair_twist_hessian[j + 1]
+                diag += h[0]
+                g += buf.pair_twist_gradient[j + 1][0]
+                if edge.edge_is_fixed[j + 1] == 0:
+                    upper = h[2]
+            if ti.static(dynamic):
+                inertia = edge.edge_rotational_inertia[j] / (dt * dt)
+                diag += inertia
+                pred = buf.edge_twist_begin[j] + dt * buf.edge_angular_velocity_begin[j]
+                g += inertia * (theta[j] - pred)
+            buf.tri_lower[j] = lower
+            buf.tri_diag[j] = diag
+            buf.tri_upper[j] = upper
+            buf.tri_rhs1[j] = -g
+
+
+@ti.kernel
+def apply_twist_update(edge: ti.template(), theta: ti.template(), buf: ti.template()):
+    for j in theta:
+        if edge.edge_is_fixed[j] == 0:
+            theta[j] += buf.tri_rhs1[j]
+
+
+# --------------------------------------------------------------------------- checks
+@ti.kernel
+def find_non_finite(vertex: ti.template(), vs: ti.template(), es: ti.template(), out: ti.template()):
+    """out[None] <- min over bad vertices of (strand * 4 + field code), or -1 if all finite.
+
+    Field codes: 0 vertex_position, 1 vertex_velocity, 2 edge_twist, 3 edge_angular_velocity.
+    """
+    out[None] = 2147483647
+    for i in vs.vertex_position:
+        code = -1
+        # NaN fails every comparison, so "not (|.| <= big)" flags NaN, inf and runaway values.
+        if not (ti.abs(vs.vertex_position[i]).sum() <= 1e30):
+            code = 0
+        elif not (ti.abs(vs.vertex_velocity[i]).sum() <= 1e30):
+            code = 1
+        elif not (ti.abs(es.edge_twist[i]) <= 1e30):
+            code = 2
+        elif not (ti.abs(es.edge_angular_velocity[i]) <= 1e30):
+            code = 3
+        if code >= 0:
+            ti.atomic_min(out[None], vertex.vertex_strand[i] * 4 + code)
+    if out[None] == 2147483647:
+        out[None] = -1

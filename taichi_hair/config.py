@@ -1,0 +1,144 @@
+"""Dataclass configurations: rod materials and solver settings.
+
+Every field carries its unit and meaning; ``__post_init__`` validates so that
+impossible parameters fail early with a message naming the field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+
+def _check_positive(owner: str, name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ValueError(f"{owner}.{name} must be a finite positive number, got {value!r}")
+
+
+@dataclass
+class RodMaterial:
+    """Physical parameters of one strand (defaults: human hair, Daviet 2023 Sec. 5).
+
+    Attributes:
+        radius: mean cross-section radius R [m].
+        ellipticity: flatness l in [0, 1); major/minor radii are (1+l)R and (1-l)R [-].
+        density: volumetric mass rho [kg/m^3].
+        youngs_modulus_bend: bending Young modulus E_b [Pa].
+        youngs_modulus_stretch: stretching Young modulus E_s [Pa]; ``None`` means E_b.
+        poisson_ratio: nu, sets the twisting stiffness (K_33 of Sec. 4.1) [-].
+        damping_time: strain-rate damping relaxation time tau (Sec. 4.4 "Dynamic
+            damping") [s]; 0 disables it.  Used in the dynamic mode only.
+    """
+
+    radius: float = 5.0e-5
+    ellipticity: float = 0.0
+    density: float = 1300.0
+    youngs_modulus_bend: float = 3.0e9
+    youngs_modulus_stretch: float | None = None
+    poisson_ratio: float = 0.45
+    damping_time: float = 0.0
+
+    def __post_init__(self):
+        if self.youngs_modulus_stretch is None:
+            self.youngs_modulus_stretch = self.youngs_modulus_bend
+        _check_positive("RodMaterial", "radius", self.radius)
+        _check_positive("RodMaterial", "density", self.density)
+        _check_positive("RodMaterial", "youngs_modulus_bend", self.youngs_modulus_bend)
+        _check_positive("RodMaterial", "youngs_modulus_stretch", self.youngs_modulus_stretch)
+        if not (math.isfinite(self.ellipticity) and 0.0 <= self.ellipticity < 1.0):
+            raise ValueError(f"RodMaterial.ellipticity must lie in [0, 1), got {self.ellipticity!r}")
+        if not (math.isfinite(self.poisson_ratio) and -1.0 < self.poisson_ratio <= 0.5):
+            raise ValueError(f"RodMaterial.poisson_ratio must lie in (-1, 0.5], got {self.poisson_ratio!r}")
+        if not (math.isfinite(self.damping_time) and self.damping_time >= 0.0):
+            raise ValueError(f"RodMaterial.damping_time must be >= 0, got {self.damping_time!r}")
+
+    # Cross-section quantities of Sec. 4.1.
+    @property
+    def area(self) -> float:
+        """A = pi R^2 (1 - l^2) [m^2]."""
+        return math.pi * self.radius**2 * (1.0 - self.ellipticity**2)
+
+    @property
+    def polar_inertia(self) -> float:
+        """Polar second moment of area A R^2 (1 + l^2) / 2 [m^4].
+
+        The paper prints I = A (1 + l^2)/2; the R^2 factor is needed for the
+        units (and gives pi R^4 / 2 for a circle), so we include it.
+        """
+        return self.area * self.radius**2 * (1.0 + self.ellipticity**2) / 2.0
+
+    def stiffness_matrix_diag(self) -> tuple[float, float, float]:
+        """Diagonal of K (Sec. 4.1): A R^2/4 ((1-l)^2, (1+l)^2, (1+l^2)/(1+nu)) [m^4].
+
+        Component a of the bending strain is the rotation-vector component along
+        the material director d_a; d_3 is the tangent (twist).
+        """
+        l = self.ellipticity
+        c = self.area * self.radius**2 / 4.0
+        return (c * (1 - l) ** 2, c * (1 + l) ** 2, c * (1 + l * l) / (1 + self.poisson_ratio))
+
+
+STRAIN_MEASURES = ("korner", "bergou")
+MODES = ("dynamic", "quasistatic")
+TRIDIAGONAL_METHODS = ("auto", "thomas", "pcr")
+
+
+@dataclass
+class SolverADMMConfig:
+    """Settings of :class:`taichi_hair.SolverADMM` (Daviet 2023, Sec. 4).
+
+    Attributes:
+        iterations: ADMM iterations per step (Algorithm 1's loop) [-].
+        mode: ``"dynamic"`` (backward Euler, Sec. 4.2) or ``"quasistatic"``
+            (inertia and drag dropped; each call to ``step`` runs more
+            iterations of the same minimisation).
+        strain_measure: ``"korner"`` (Korner et al. 2021: bending from the
+            rotation between adjacent material frames, 2 sin(phi/2);
+            hyperelastic stretch) or ``"bergou"`` (Bergou et al. 2008:
+            curvature binormal, 2 tan(phi/2); linear stretch).
+        w0: scale of the elasticity constraint weights
+            W_y = w0 E_b A R^2 / (4 v^3) (Sec. 4.4) [-].
+        voronoi_rescaling: use v_1* = e_0 + e_1/2 and its tip mirror for the
+            bending Voronoi lengths of the second and penultimate vertices
+            (Sec. 5.1 "Cantilever").
+        local_frame_rotation: store the elasticity duals in the root
+            attachment frame Q^t of each strand (Sec. 4.4 "Local frame"), so that
+            warm-started duals follow a rotating head.
+        warm_start_duals: keep lambda_y from one step to the next.  The paper
+            is silent; without it, ``local_frame_rotation`` would have no effect.
+        air_viscosity: linear drag coefficient xi, force per unit length
+            xi (v_air - v) [Pa s].  Dynamic mode only.
+        tridiagonal: ``"thomas"`` (per-strand sequential, best on CPU),
+            ``"pcr"`` (parallel cyclic reduction; strand blocks in shared
+            memory on CUDA), or ``"auto"`` (Thomas on CPU, PCR on GPU).
+        check_finite: after each step, check every state value for NaN/inf
+            and raise :class:`SimulationDivergedError` naming the strand.
+    """
+
+    iterations: int = 10
+    mode: str = "dynamic"
+    strain_measure: str = "korner"
+    w0: float = 25.0
+    voronoi_rescaling: bool = True
+    local_frame_rotation: bool = True
+    warm_start_duals: bool = True
+    air_viscosity: float = 0.0
+    tridiagonal: str = "auto"
+    check_finite: bool = True
+
+    def __post_init__(self):
+        if not (isinstance(self.iterations, int) and self.iterations >= 1):
+            raise ValueError(f"SolverADMMConfig.iterations must be an integer >= 1, got {self.iterations!r}")
+        if self.mode not in MODES:
+            raise ValueError(f"SolverADMMConfig.mode must be one of {MODES}, got {self.mode!r}")
+        if self.strain_measure not in STRAIN_MEASURES:
+            raise ValueError(
+                f"SolverADMMConfig.strain_measure must be one of {STRAIN_MEASURES}, got {self.strain_measure!r}"
+            )
+        if self.tridiagonal not in TRIDIAGONAL_METHODS:
+            raise ValueError(
+                f"SolverADMMConfig.tridiagonal must be one of {TRIDIAGONAL_METHODS}, got {self.tridiagonal!r}"
+            )
+        _check_positive("SolverADMMConfig", "w0", self.w0)
+        if not (math.isfinite(self.air_viscosity) and self.air_viscosity >= 0):
+            raise ValueError(f"SolverADMMConfig.air_viscosity must be >= 0, got {self.air_viscosity!r}")

@@ -1,0 +1,109 @@
+"""ADMM local step: the elasticity proximal operator per edge pair (Sec. 4.4, Eq. 4).
+
+For each interior vertex i we approximately solve
+
+    min_y  E_b,i(y) + E_s,i(y) + D_i(y) + w_i/2 |(Bx)_i - lambda_i - y|^2,   y in R^6
+
+with a single Gauss-Newton step from y0 = (Bx)_i (where the frames are known),
+combined bending and stretching (each edge's stretch stiffness halved when it
+is shared by two pairs), and the strain-rate damping terms D_s, D_b of
+Brown et al. 2018 in the dynamic mode.  The 6x6 system is solved by LDL^T
+without pivoting in the working precision.
+
+With the root-attachment rotation Q (Sec. 4.4 "Local frame") the dual lambda
+is stored in the strand's body frame; it is rotated to world coordinates here.
+"""
+
+import taichi as ti
+
+from .strains import (
+    ldlt_solve6,
+    mat36,
+    pair_edge_jacobian,
+    pair_kappa,
+    stretch_strain,
+    vec6,
+)
+
+vec3 = ti.math.vec3
+
+
+@ti.func
+def dual_to_world(lam: vec6, R: ti.math.mat3) -> vec6:
+    a = R @ vec3(lam[0], lam[1], lam[2])
+    b = R @ vec3(lam[3], lam[4], lam[5])
+    return vec6(a[0], a[1], a[2], b[0], b[1], b[2])
+
+
+@ti.func
+def strand_frame(strand: ti.template(), body_rotation: ti.template(), s: int, use_q: ti.template()):
+    """Q^t of Sec. 4.4: the root attachment rotation of strand s (identity if free or disabled)."""
+    R = ti.Matrix.identity(float, 3)
+    if ti.static(use_q):
+        b = strand.strand_body[s]
+        if b >= 0:
+            R = body_rotation[b]
+    return R
+
+
+@ti.kernel
+def solve_local_elasticity(
+    measure: ti.template(),
+    use_q: ti.template(),
+    vertex: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+    buf: ti.template(),
+    damping_scale: float,
+):
+    """y_i <- one Gauss-Newton step of Eq. (4) for every edge pair.
+
+    ``damping_scale`` is 1/dt in the dynamic mode and 0 in the quasistatic one;
+    tau * damping_scale is the strain-rate damping weight of Sec. 4.4.
+    """
+    for i in x:
+        if pair.pair_is_active[i] != 0:
+            a = i - 1
+            ea = x[i] - x[a]
+            eb = x[i + 1] - x[i]
+            m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
+            m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
+            twist = theta[i] - theta[a] + es.edge_reference_twist[i]
+            kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
+            J = pair_edge_jacobian(measure, m1a, m2a, ta, ea.norm(), m1b, m2b, tb, eb.norm())
+            s = vertex.vertex_strand[i]
+            c = strand.strand_damping_time[s] * damping_scale
+            k = buf.pair_bend_stiffness[i]
+            # Bending + bending damping (Gauss-Newton: J^T K J).
+            gk = k * ((kappa - buf.pair_rest_kappa[i]) + c * (kappa - buf.pair_kappa_begin[i]))
+            KJ = mat36(0.0)
+            for r in ti.static(range(3)):
+                for col in ti.static(range(6)):
+                    KJ[r, col] = k[r] * J[r, col]
+            H = (1.0 + c) * (J.transpose() @ KJ)
+            g = J.transpose() @ gk
+            # Stretching of both edges (+ damping), stiffness halved on shared edges.
+            eps_a, ga = stretch_strain(measure, ea, edge.edge_rest_length[a])
+            eps_b, gb = stretch_strain(measure, eb, edge.edge_rest_length[i])
+            ksa = buf.edge_pair_stretch_stiffness[a]
+            ksb = buf.edge_pair_stretch_stiffness[i]
+            fa = ksa * (eps_a + c * (eps_a - buf.edge_strain_begin[a]))
+            fb = ksb * (eps_b + c * (eps_b - buf.edge_strain_begin[i]))
+            for r in ti.static(range(3)):
+                g[r] += fa * ga[r]
+                g[r + 3] += fb * gb[r]
+                for col in ti.static(range(3)):
+                    H[r, col] += (1.0 + c) * ksa * ga[r] * ga[col]
+                    H[r + 3, col + 3] += (1.0 + c) * ksb * gb[r] * gb[col]
+            # Proximal term w/2 |y - (Bx - lambda)|^2 linearised at y0 = Bx.
+            w = buf.pair_admm_weight[i]
+            lam = dual_to_world(buf.pair_dual[i], strand_frame(strand, body_rotation, s, use_q))
+            for r in ti.static(range(6)):
+                H[r, r] += w
+            delta = ldlt_solve6(H, -g - w * lam)
+            buf.pair_y[i] = vec6(ea[0], ea[1], ea[2], eb[0], eb[1], eb[2]) + delta

@@ -1,0 +1,163 @@
+"""Structure-of-arrays field groups (one Taichi field per quantity).
+
+Layout: all strands live in one flat vertex array; strand ``s`` owns vertices
+``strand_vertex_start[s] ... strand_vertex_start[s] + strand_vertex_count[s] - 1``.
+Edges and edge pairs reuse the vertex index:
+
+* edge ``i`` joins vertices ``i`` and ``i + 1``; the slot of a strand's last
+  vertex is a *ghost edge* whose twist is kinematically fixed (Sec. 4.1 extends
+  the twists to m per strand the same way);
+* the edge pair ``(e_{i-1}, e_i)`` belongs to vertex ``i`` and exists for
+  interior vertices only (0 < local index < m - 1).
+
+So every per-vertex, per-edge and per-pair field has shape ``(vertex_count,)``
+and a strand is a contiguous range in all of them.  Groups are split by how
+often they change: ``*Info`` groups belong to the Model and are written once at
+``finalize()``; ``*StateFields`` change every step; solver scratch lives with
+the solver.  Every field is allocated once, never inside ``step()``.
+"""
+
+from __future__ import annotations
+
+import taichi as ti
+
+vec3 = ti.math.vec3
+vec6 = ti.types.vector(6, float)
+
+
+class VertexInfo:
+    """Static per-vertex data.  All fields have shape (vertex_count,)."""
+
+    def __init__(self, n: int):
+        #: Lumped mass m_i = rho A v_i [kg].
+        self.vertex_mass = ti.field(float, n)
+        #: Voronoi length v_i = (e_{i-1} + e_i)/2 at rest (true value, used for mass and drag) [m].
+        self.vertex_voronoi_length = ti.field(float, n)
+        #: Index of the strand owning the vertex [-].
+        self.vertex_strand = ti.field(ti.i32, n)
+        #: Index of the vertex inside its strand, 0 at the root [-].
+        self.vertex_local_index = ti.field(ti.i32, n)
+        #: 1 if the vertex is kinematic (clamped root vertex), else 0 [-].
+        self.vertex_is_fixed = ti.field(ti.i32, n)
+        #: Position of a kinematic vertex in its body's frame [m] (zero for free vertices).
+        self.vertex_body_position = ti.field(vec3, n)
+        #: Rest (input) position [m].
+        self.vertex_rest_position = ti.field(vec3, n)
+
+
+class EdgeInfo:
+    """Static per-edge data.  Shape (vertex_count,); a strand's last slot is the ghost edge."""
+
+    def __init__(self, n: int):
+        #: Rest length e_j [m] (0 on ghost edges).
+        self.edge_rest_length = ti.field(float, n)
+        #: Full stretch stiffness E_s A e_j (energy 1/2 k eps^2) [N m].
+        self.edge_stretch_stiffness = ti.field(float, n)
+        #: Rotational inertia rho I e_j about the tangent [kg m].  (I = A R^2 (1+l^2)/2.)
+        self.edge_rotational_inertia = ti.field(float, n)
+        #: 1 if the twist of the edge is kinematic (clamped root edge or ghost edge) [-].
+        self.edge_is_fixed = ti.field(ti.i32, n)
+        #: Rest reference director d1 (space-parallel transported along the input shape) [-].
+        self.edge_rest_director = ti.field(vec3, n)
+        #: Rest twist angle of the material frame about the rest reference frame [rad].
+        self.edge_rest_twist = ti.field(float, n)
+
+
+class PairInfo:
+    """Static per-edge-pair (interior vertex) data.  Shape (vertex_count,), zero on strand ends."""
+
+    def __init__(self, n: int):
+        #: 1 if vertex i is interior (the pair (e_{i-1}, e_i) exists), else 0 [-].
+        self.pair_is_active = ti.field(ti.i32, n)
+        #: Diagonal of E_b K (Sec. 4.1): bending about d1, d2 and twisting rigidities [N m^2].
+        self.pair_bending_modulus = ti.field(vec3, n)
+        #: E_b A R^2 / 4, the scale of the ADMM weights W_y (Sec. 4.4) [N m^2].
+        self.pair_bending_rigidity = ti.field(float, n)
+
+
+class StrandInfo:
+    """Static per-strand data.  All fields have shape (strand_count,)."""
+
+    def __init__(self, n: int):
+        #: Index of the strand's first (root) vertex [-].
+        self.strand_vertex_start = ti.field(ti.i32, n)
+        #: Number of vertices m of the strand [-].
+        self.strand_vertex_count = ti.field(ti.i32, n)
+        #: Body the root is clamped to (index into Control.body_*), -1 if free [-].
+        self.strand_body = ti.field(ti.i32, n)
+        #: Reference director d1 of the root edge in the body frame [-] (unit).
+        self.strand_root_director = ti.field(vec3, n)
+        #: Strain-rate damping relaxation time tau [s].
+        self.strand_damping_time = ti.field(float, n)
+
+
+class VertexStateFields:
+    """Per-vertex state.  Shape (vertex_count,)."""
+
+    def __init__(self, n: int):
+        #: Centerline position x_i [m].
+        self.vertex_position = ti.field(vec3, n)
+        #: Velocity v_i [m/s].
+        self.vertex_velocity = ti.field(vec3, n)
+
+
+class EdgeStateFields:
+    """Per-edge state, frames included.  Shape (vertex_count,); ghost slots stay zero."""
+
+    def __init__(self, n: int):
+        #: Twist angle theta_j of the material frame about the reference frame [rad].
+        self.edge_twist = ti.field(float, n)
+        #: Angular velocity omega_j of the twist [rad/s].
+        self.edge_angular_velocity = ti.field(float, n)
+        #: Unit tangent t_j of the current edge [-].
+        self.edge_tangent = ti.field(vec3, n)
+        #: Reference director d1_j, time-parallel transported [-]; d2 = t x d1.
+        self.edge_reference_director = ti.field(vec3, n)
+        #: Material directors (m1_j, m2_j), the reference frame rotated by theta_j [-].
+        self.edge_material_d1 = ti.field(vec3, n)
+        self.edge_material_d2 = ti.field(vec3, n)
+        #: Reference twist of the pair ending at edge j: signed angle from the space-parallel
+        #: transport of d1_{j-1} to d1_j about t_j, kept continuous in time [rad].
+        #: Stored at the pair's vertex index j.
+        self.edge_reference_twist = ti.field(float, n)
+
+
+class SolverBuffers:
+    """Scratch and history of SolverADMM.  Shape (vertex_count,) unless stated."""
+
+    def __init__(self, n: int):
+        #: Begin-of-step positions x^t [m] and velocities v^t [m/s].
+        self.vertex_position_begin = ti.field(vec3, n)
+        self.vertex_velocity_begin = ti.field(vec3, n)
+        #: Begin-of-step twists theta^t [rad] and angular velocities omega^t [rad/s].
+        self.edge_twist_begin = ti.field(float, n)
+        self.edge_angular_velocity_begin = ti.field(float, n)
+        #: Begin-of-step strains for strain-rate damping: kappa^t [-] and eps^t [-].
+        self.pair_kappa_begin = ti.field(vec3, n)
+        self.edge_strain_begin = ti.field(float, n)
+        #: Local-step result y_i = (e_{i-1}, e_i) [m], world frame.
+        self.pair_y = ti.field(vec6, n)
+        #: Scaled dual lambda_y [m], in the root-attachment frame Q^t when enabled.
+        self.pair_dual = ti.field(vec6, n)
+        #: Per-pair twist Hessian (d2/dtheta_a^2, d2/dtheta_b^2, d2/dtheta_a dtheta_b) [J]
+        #: and gradient (d/dtheta_a, d/dtheta_b) [J], assembled into the twist system.
+        self.pair_twist_hessian = ti.field(vec3, n)
+        self.pair_twist_gradient = ti.field(ti.math.vec2, n)
+        #: Rest strain kappa_bar of each pair for the chosen strain measure [-].
+        self.pair_rest_kappa = ti.field(vec3, n)
+        #: Diagonal of E_b K / v_i*, v_i* the bending Voronoi length (rescaled at the
+        #: strand ends when enabled, Sec. 5.1) [J].
+        self.pair_bend_stiffness = ti.field(vec3, n)
+        #: ADMM weight W_y,i = w0 E_b A R^2 / (4 v_i*^3) (Sec. 4.4) [N/m].
+        self.pair_admm_weight = ti.field(float, n)
+        #: Stretch stiffness E_s A e_j seen by one pair, halved when the edge belongs
+        #: to two pairs (Sec. 4.4) [N m].
+        self.edge_pair_stretch_stiffness = ti.field(float, n)
+        #: Tridiagonal systems: lower/diag/upper [N/m or J], right-hand sides.
+        self.tri_lower = ti.field(float, n)
+        self.tri_diag = ti.field(float, n)
+        self.tri_upper = ti.field(float, n)
+        #: Right-hand side then solution of the position system (3 axes) [N -> m].
+        self.tri_rhs3 = ti.field(vec3, n)
+        #: Right-hand side then solution of the twist system [J -> rad].
+        self.tri_rhs1 = ti.field(float, n)

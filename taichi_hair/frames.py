@@ -1,0 +1,72 @@
+"""DER reference and material frames (Bergou et al. 2010, time-parallel transport).
+
+Each time x or theta changes (Algorithm 1), frames are brought up to date:
+``update_reference_frames`` transports every edge's reference director from
+its old tangent to its new one (time-parallel transport), re-derives the
+material frame from the twist, and updates the reference twist of each edge
+pair continuously in time; ``update_material_frames`` only re-derives the
+material directors after a twist update.  The root edge of a clamped strand
+takes its reference director from the body it is attached to, so an animated
+root rotates the whole frame, not just the tangent.
+"""
+
+import math
+
+import taichi as ti
+
+from .strains import material_frame, parallel_transport, signed_angle
+
+vec3 = ti.math.vec3
+
+
+@ti.func
+def wrap_angle(a: float) -> float:
+    """Map an angle to (-pi, pi]."""
+    two_pi = 2.0 * math.pi
+    return a - two_pi * ti.round(a / two_pi)
+
+
+@ti.kernel
+def update_reference_frames(
+    vertex: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+):
+    """Tangents, reference directors, material directors and reference twists from x and theta."""
+    for i in x:
+        if edge.edge_rest_length[i] > 0.0:
+            t_new = (x[i + 1] - x[i]).normalized()
+            d1 = parallel_transport(es.edge_reference_director[i], es.edge_tangent[i], t_new)
+            s = vertex.vertex_strand[i]
+            b = strand.strand_body[s]
+            if vertex.vertex_local_index[i] == 0 and b >= 0:
+                d1 = body_rotation[b] @ strand.strand_root_director[s]
+            d1 = (d1 - d1.dot(t_new) * t_new).normalized()
+            es.edge_tangent[i] = t_new
+            es.edge_reference_director[i] = d1
+            m1, m2 = material_frame(d1, t_new, theta[i])
+            es.edge_material_d1[i] = m1
+            es.edge_material_d2[i] = m2
+    for i in x:
+        if pair.pair_is_active[i] != 0:
+            t_prev = es.edge_tangent[i - 1]
+            t_cur = es.edge_tangent[i]
+            d1_transported = parallel_transport(es.edge_reference_director[i - 1], t_prev, t_cur)
+            angle = signed_angle(d1_transported, es.edge_reference_director[i], t_cur)
+            old = es.edge_reference_twist[i]
+            es.edge_reference_twist[i] = old + wrap_angle(angle - old)
+
+
+@ti.kernel
+def update_material_frames(edge: ti.template(), theta: ti.template(), es: ti.template()):
+    """Material directors after a twist update (tangents and reference frames unchanged)."""
+    for i in theta:
+        if edge.edge_rest_length[i] > 0.0:
+            m1, m2 = material_frame(es.edge_reference_director[i], es.edge_tangent[i], theta[i])
+            es.edge_material_d1[i] = m1
+            es.edge_material_d2[i] = m2

@@ -1,0 +1,79 @@
+"""Model: everything about the groom that does not change in time.
+
+A :class:`Model` is made by :meth:`GroomBuilder.finalize`.  It owns the static
+field groups of :mod:`taichi_hair.fields` (flattened into attributes, so a
+kernel can take the model once for all of them) and NumPy copies of the same
+arrays for host-side set-up (``model.host``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import taichi as ti
+
+from .fields import EdgeInfo, PairInfo, StrandInfo, VertexInfo
+from .frames import update_reference_frames
+from .state import Control, State
+
+
+class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
+    """Static description of a groom (see :mod:`taichi_hair.fields` for every field).
+
+    Attributes:
+        vertex_count: total number of vertices n [-].
+        strand_count: number of strands [-].
+        body_count: number of rigid bodies roots can be clamped to [-].
+        host: dict of NumPy arrays mirroring the fields (float64 where physical).
+        materials: list of the per-strand :class:`RodMaterial`.
+    """
+
+    def __init__(self, host: dict, materials: list, body_count: int):
+        n = int(host["vertex_strand"].shape[0])
+        ns = int(host["strand_vertex_start"].shape[0])
+        self.vertex_count = n
+        self.strand_count = ns
+        self.body_count = body_count
+        self.host = host
+        self.materials = materials
+        VertexInfo.__init__(self, n)
+        EdgeInfo.__init__(self, n)
+        PairInfo.__init__(self, n)
+        StrandInfo.__init__(self, ns)
+        for name, value in host.items():
+            field = getattr(self, name, None)
+            if isinstance(field, ti.Field):
+                field.from_numpy(np.ascontiguousarray(value, dtype=_np_dtype(field)))
+        #: Identity body transforms, used to build the rest state.
+        self._rest_rotation = ti.Matrix.field(3, 3, float, body_count)
+        self._rest_rotation.from_numpy(np.tile(np.eye(3), (body_count, 1, 1)).astype(_np_float()))
+
+    # ------------------------------------------------------------------ factories
+    def state(self) -> State:
+        """A new State at rest: input positions, zero velocities, rest twists and frames."""
+        s = State(self.vertex_count)
+        s.vertex_position.copy_from(self.vertex_rest_position)
+        s.edge_twist.copy_from(self.edge_rest_twist)
+        s.edge_tangent.from_numpy(self.host["edge_rest_tangent"].astype(_np_float()))
+        s.edge_reference_director.copy_from(self.edge_rest_director)
+        update_reference_frames(self, self, self, self, self._rest_rotation, s.vertex_position, s.edge_twist, s)
+        return s
+
+    def control(self) -> Control:
+        """A new Control: identity body transforms, gravity (0, -9.81, 0) m/s^2, still air."""
+        return Control(self.body_count)
+
+    # ------------------------------------------------------------------ helpers
+    def strand_slices(self):
+        """List of (start, count) per strand."""
+        return list(zip(self.host["strand_vertex_start"].tolist(), self.host["strand_vertex_count"].tolist()))
+
+
+def _np_float():
+    return np.float64 if ti.lang.impl.current_cfg().default_fp == ti.f64 else np.float32
+
+
+def _np_dtype(field):
+    dt = field.dtype
+    if dt in (ti.i32,):
+        return np.int32
+    return _np_float()

@@ -1,0 +1,235 @@
+"""SolverADMM: Algorithm 1 of Daviet 2023 as a short sequence of kernel launches.
+
+Per step (Sec. 4.2):
+
+1. collision detection                       -- Sec. 4.5 (contacts issue; slot kept)
+2. advect the initial guess x <- x^t + dt v  -- ``admm.begin_step``
+3. update DER frames                         -- ``frames.update_reference_frames``
+4. for each ADMM iteration:
+   a. local elasticity solve -> y           -- ``elasticity.solve_local_elasticity`` (Sec. 4.4)
+   b. feasible projection -> z              -- Sec. 4.5 (contacts issue; slot kept)
+   c. lambda_y <- lambda_y + y - Bx         -- ``admm.update_duals``
+   d. tridiagonal solve M dx = f            -- ``admm.assemble_position_system`` + ``tridiag`` (Sec. 4.3, Eq. 3)
+   e. x <- x + dx, update frames
+   f. twist Newton step d2E/dth2 dth = -dE/dth -- ``admm.compute_pair_twist_terms`` + ``assemble_twist_system``
+   g. theta <- theta + dth, update frames
+5. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
+
+The step allocates nothing: all buffers are created in ``__init__``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import taichi as ti
+
+from . import admm
+from .config import SolverADMMConfig
+from .elasticity import solve_local_elasticity
+from .errors import SimulationDivergedError
+from .fields import SolverBuffers
+from .frames import update_material_frames, update_reference_frames
+from .model import Model, _np_float
+from .state import Control, State
+from .strains import BERGOU, KORNER
+from .tridiag import TridiagonalSolver
+
+STAGES = ("begin", "local", "dual", "global", "frames", "twist", "end")
+_FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
+
+
+class SolverADMM:
+    """ADMM local-global integrator for Discrete Elastic Rods (Daviet 2023).
+
+    Args:
+        model: the :class:`Model` to simulate.
+        config: :class:`SolverADMMConfig`.
+        profile: if True, synchronise after each stage and accumulate wall
+            times in ``stage_seconds`` (slower; for benchmarks).
+    """
+
+    def __init__(self, model: Model, config: SolverADMMConfig | None = None, profile: bool = False):
+        self.model = model
+        self.config = config or SolverADMMConfig()
+        cfg = self.config
+        h = model.host
+        if cfg.mode == "quasistatic":
+            free = np.where(h["strand_body"] < 0)[0]
+            if free.size:
+                raise ValueError(
+                    f"strand {int(free[0])}: field 'root' is 'free', but the quasistatic mode needs every strand "
+                    "clamped (a free strand has no equilibrium under gravity)")
+        self.dynamic = cfg.mode == "dynamic"
+        self.measure = KORNER if cfg.strain_measure == "korner" else BERGOU
+        self.use_q = bool(cfg.local_frame_rotation)
+        self.buf = SolverBuffers(model.vertex_count)
+        self._bad = ti.field(ti.i32, ())
+        self._diag_kappa = ti.Vector.field(3, float, model.vertex_count)
+        self._diag_strain = ti.field(float, model.vertex_count)
+        self._set_coefficients()
+        arch = ti.lang.impl.current_cfg().arch
+        method = cfg.tridiagonal
+        if method == "auto":
+            method = "pcr" if arch in (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu) else "thomas"
+        self.tridiagonal_method = method
+        self.tridiag = TridiagonalSolver(model.strand_vertex_start, model.strand_vertex_count, model.vertex_strand,
+                                         h["strand_vertex_count"], method)
+        self.profile = profile
+        self.stage_seconds = {k: 0.0 for k in STAGES}
+        self.step_count = 0
+        self.iteration_count = 0
+
+    # ------------------------------------------------------------------ set-up
+    def _set_coefficients(self) -> None:
+        """Discretisation-dependent coefficients (bending Voronoi lengths, W_y, halved stretch, rest strains)."""
+        m, cfg, h = self.model, self.config, self.model.host
+        n = m.vertex_count
+        le = h["edge_rest_length"]
+        local = h["vertex_local_index"]
+        count_of_vertex = h["strand_vertex_count"][h["vertex_strand"]]
+        active = h["pair_is_active"].astype(bool)
+        # Bending Voronoi length of pair i: halves of both edges, or the full boundary
+        # edge for the second and penultimate vertices when rescaling (Sec. 5.1).
+        prev = np.zeros(n)
+        nxt = np.zeros(n)
+        prev[1:] = le[:-1]
+        nxt[:] = le
+        wprev = np.full(n, 0.5)
+        wnext = np.full(n, 0.5)
+        if cfg.voronoi_rescaling:
+            wprev[local == 1] = 1.0
+            wnext[local == count_of_vertex - 2] = 1.0
+        vstar = np.where(active, wprev * prev + wnext * nxt, 1.0)
+        bend = np.where(active[:, None], h["pair_bending_modulus"] / vstar[:, None], 0.0)
+        weight = np.where(active, cfg.w0 * h["pair_bending_rigidity"] / vstar**3, 0.0)
+        # Edge j belongs to pairs j and j+1 when 1 <= local j <= m-3: halve its stretch there.
+        shared = (local >= 1) & (local <= count_of_vertex - 3)
+        ks = h["edge_stretch_stiffness"] * np.where(shared, 0.5, 1.0)
+        f = _np_float()
+        self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
+        self.buf.pair_admm_weight.from_numpy(weight.astype(f))
+        self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
+        self.host_pair_voronoi_bend = vstar
+        rest = m.state()
+        admm.compute_strains(self.measure, m, m, rest.vertex_position, rest.edge_twist, rest,
+                             self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, state: State, control: Control, dt: float) -> None:
+        """Advance ``state`` in place by one time step (Algorithm 1).
+
+        Args:
+            state: positions, velocities, twists and frames at the beginning of the step.
+            control: body transforms at the *end* of the step, gravity and air velocity.
+            dt: time step [s]; in the quasistatic mode it only scales nothing and may be any
+                positive number.
+
+        Raises:
+            SimulationDivergedError: if any value becomes non-finite; ``state`` is then
+                restored to the beginning of the step.
+        """
+        if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+            raise ValueError(f"SolverADMM.step: dt must be a finite positive number, got {dt!r}")
+        m, b, cfg = self.model, self.buf, self.config
+        dyn = self.dynamic
+        damping_scale = 1.0 / dt if dyn else 0.0
+        g = ti.math.vec3(*control.gravity)
+        v_air = ti.math.vec3(*control.air_velocity)
+
+        t0 = self._tick()
+        # Begin-of-step strains for strain-rate damping (Sec. 4.4), then advect (Alg. 1 l.2).
+        admm.compute_strains(self.measure, m, m, state.vertex_position, state.edge_twist, state,
+                             b.pair_kappa_begin, b.edge_strain_begin)
+        admm.begin_step(dyn, m, m, control.body_rotation, control.body_translation, m, state, state, b, dt)
+        if not cfg.warm_start_duals:
+            admm.reset_duals(b)
+        t0 = self._tock("begin", t0)
+        update_reference_frames(m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist, state)
+        t0 = self._tock("frames", t0)
+
+        for _ in range(cfg.iterations):
+            # (a) Local elasticity solve over y (Sec. 4.4).
+            solve_local_elasticity(self.measure, self.use_q, m, m, m, m, control.body_rotation,
+                                   state.vertex_position, state.edge_twist, state, b, damping_scale)
+            t0 = self._tock("local", t0)
+            # (b) Feasible projection over z (Sec. 4.5) goes here once contacts exist.
+            # (c) Dual update.
+            admm.update_duals(self.use_q, m, m, m, control.body_rotation, state.vertex_position, b)
+            t0 = self._tock("dual", t0)
+            # (d, e) Global tridiagonal solve over x (Sec. 4.3), then frames.
+            admm.assemble_position_system(dyn, self.use_q, m, m, m, m, control.body_rotation,
+                                          state.vertex_position, b, g, v_air, cfg.air_viscosity, dt)
+            self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
+            admm.apply_position_update(m, state.vertex_position, b)
+            t0 = self._tock("global", t0)
+            update_reference_frames(m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist,
+                                    state)
+            t0 = self._tock("frames", t0)
+            # (f, g) Twist Newton step, then material frames.
+            admm.compute_pair_twist_terms(self.measure, m, m, m, state.edge_twist, state, b, damping_scale)
+            admm.assemble_twist_system(dyn, m, m, state.edge_twist, b, dt)
+            self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs1)
+            admm.apply_twist_update(m, state.edge_twist, b)
+            t0 = self._tock("twist", t0)
+            update_material_frames(m, state.edge_twist, state)
+            t0 = self._tock("frames", t0)
+            self.iteration_count += 1
+
+        admm.end_step(dyn, state, state, b, dt)
+        self.step_count += 1
+        if cfg.check_finite:
+            self.check_finite(state)
+        self._tock("end", t0)
+
+    def check_finite(self, state: State) -> None:
+        """Raise SimulationDivergedError (after restoring the begin-of-step state) on NaN/inf."""
+        admm.find_non_finite(self.model, state, state, self._bad)
+        code = int(self._bad[None])
+        if code >= 0:
+            admm.restore_begin(state, state, self.buf)
+            update_reference_frames(self.model, self.model, self.model, self.model, self.model._rest_rotation,
+                                    state.vertex_position, state.edge_twist, state)
+            raise SimulationDivergedError(code // 4, _FIELD_NAMES[code % 4], self.step_count)
+
+    def reset_duals(self) -> None:
+        """Forget the warm-started elasticity multipliers (e.g. after a teleport)."""
+        admm.reset_duals(self.buf)
+
+    # ------------------------------------------------------------------ diagnostics
+    def energy(self, state: State, control: Control) -> dict:
+        """Elastic and gravitational energies of ``state`` [J] (host-side, float64).
+
+        Bending uses the solver's discretisation (bending Voronoi lengths);
+        stretching the full per-edge stiffness.  Returns a dict with keys
+        ``bend``, ``stretch``, ``gravity``, ``total``.
+        """
+        m, b = self.model, self.buf
+        kappa, eps = self._diag_kappa, self._diag_strain
+        admm.compute_strains(self.measure, m, m, state.vertex_position, state.edge_twist, state, kappa, eps)
+        k = kappa.to_numpy().astype(np.float64)
+        rk = b.pair_rest_kappa.to_numpy().astype(np.float64)
+        kb = b.pair_bend_stiffness.to_numpy().astype(np.float64)
+        e = eps.to_numpy().astype(np.float64)
+        h = m.host
+        bend = 0.5 * float(np.sum(kb * (k - rk) ** 2))
+        stretch = 0.5 * float(np.sum(h["edge_stretch_stiffness"] * e**2))
+        x = state.vertex_position.to_numpy().astype(np.float64)
+        grav = -float(np.sum(h["vertex_mass"][:, None] * x * np.asarray(control.gravity)[None, :]))
+        return {"bend": bend, "stretch": stretch, "gravity": grav, "total": bend + stretch + grav}
+
+    # ------------------------------------------------------------------ timing
+    def _tick(self) -> float:
+        if self.profile:
+            ti.sync()
+            return time.perf_counter()
+        return 0.0
+
+    def _tock(self, stage: str, t0: float) -> float:
+        if self.profile:
+            ti.sync()
+            t1 = time.perf_counter()
+            self.stage_seconds[stage] += t1 - t0
+            return t1
+        return 0.0
