@@ -10,7 +10,6 @@ the twist system has entries in J (per rad^2) and right-hand sides in J.
 
 import taichi as ti
 
-from .elasticity import strand_frame
 from .strains import pair_kappa, pair_twist_derivatives, stretch_strain, vec6
 
 vec3 = ti.math.vec3
@@ -109,58 +108,19 @@ def compute_strains(
 
 # --------------------------------------------------------------------------- duals
 @ti.kernel
-def update_duals(
-    use_q: ti.template(),
-    vertex: ti.template(),
-    pair: ti.template(),
-    strand: ti.template(),
-    body_rotation: ti.template(),
-    x: ti.template(),
-    buf: ti.template(),
-):
-    """lambda_y <- lambda_y + Q^T (y - Bx) (Algorithm 1; scaled dual, stored in the root frame)."""
-    for i in x:
-        if pair.pair_is_active[i] != 0:
-            ea = x[i] - x[i - 1]
-            eb = x[i + 1] - x[i]
-            y = buf.pair_y[i]
-            Rt = strand_frame(strand, body_rotation, vertex.vertex_strand[i], use_q).transpose()
-            ra = Rt @ vec3(y[0] - ea[0], y[1] - ea[1], y[2] - ea[2])
-            rb = Rt @ vec3(y[3] - eb[0], y[4] - eb[1], y[5] - eb[2])
-            buf.pair_dual[i] += vec6(ra[0], ra[1], ra[2], rb[0], rb[1], rb[2])
-
-
-@ti.kernel
 def reset_duals(buf: ti.template()):
     for i in buf.pair_dual:
         buf.pair_dual[i] = vec6(0.0)
+        buf.pair_force[i] = vec6(0.0)
 
 
 # --------------------------------------------------------------------------- global step (Sec. 4.3)
-@ti.func
-def pair_residual_force(pair: ti.template(), strand: ti.template(), body_rotation: ti.template(),
-                        vertex: ti.template(), x: ti.template(), buf: ti.template(), p: int, use_q: ti.template()):
-    """r_p = W_y,p (lambda_p + y_p - (Bx)_p) in world coordinates, as two 3-vectors [N]."""
-    lam = buf.pair_dual[p]
-    R = strand_frame(strand, body_rotation, vertex.vertex_strand[p], use_q)
-    la = R @ vec3(lam[0], lam[1], lam[2])
-    lb = R @ vec3(lam[3], lam[4], lam[5])
-    y = buf.pair_y[p]
-    w = buf.pair_admm_weight[p]
-    ra = w * (la + vec3(y[0], y[1], y[2]) - (x[p] - x[p - 1]))
-    rb = w * (lb + vec3(y[3], y[4], y[5]) - (x[p + 1] - x[p]))
-    return ra, rb
-
-
 @ti.kernel
 def assemble_position_system(
     dynamic: ti.template(),
-    use_q: ti.template(),
     vertex: ti.template(),
     edge: ti.template(),
     pair: ti.template(),
-    strand: ti.template(),
-    body_rotation: ti.template(),
     x: ti.template(),
     buf: ti.template(),
     gravity: vec3,
@@ -206,18 +166,17 @@ def assemble_position_system(
                 diag += we
                 if vertex.vertex_is_fixed[i + 1] == 0:
                     upper = -we
-            # B^T r: vertex i gets ra_i - rb_i from its own pair, rb_{i-1}, -ra_{i+1}.
-            if pair.pair_is_active[i] != 0:
-                ra, rb = pair_residual_force(pair, strand, body_rotation, vertex, x, buf, i, use_q)
-                f += ra - rb
+            # B^T r with r_p = W_y (lambda + y - Bx)_p = (ra_p, rb_p) from the local step:
+            # vertex i gets ra_i - rb_i from its own pair, rb_{i-1} and -ra_{i+1}
+            # (pair_force is zero on inactive pairs).
+            r = buf.pair_force[i]
+            f += vec3(r[0] - r[3], r[1] - r[4], r[2] - r[5])
             if vertex.vertex_local_index[i] > 0:
-                if pair.pair_is_active[i - 1] != 0:
-                    ra, rb = pair_residual_force(pair, strand, body_rotation, vertex, x, buf, i - 1, use_q)
-                    f += rb
+                r = buf.pair_force[i - 1]
+                f += vec3(r[3], r[4], r[5])
             if edge.edge_rest_length[i] > 0.0:
-                if pair.pair_is_active[i + 1] != 0:
-                    ra, rb = pair_residual_force(pair, strand, body_rotation, vertex, x, buf, i + 1, use_q)
-                    f -= ra
+                r = buf.pair_force[i + 1]
+                f -= vec3(r[0], r[1], r[2])
             buf.tri_lower[i] = lower
             buf.tri_diag[i] = diag
             buf.tri_upper[i] = upper
@@ -319,13 +278,6 @@ def assemble_twist_system(
             buf.tri_diag[j] = diag
             buf.tri_upper[j] = upper
             buf.tri_rhs1[j] = -g
-
-
-@ti.kernel
-def apply_twist_update(edge: ti.template(), theta: ti.template(), buf: ti.template()):
-    for j in theta:
-        if edge.edge_is_fixed[j] == 0:
-            theta[j] += buf.tri_rhs1[j]
 
 
 # --------------------------------------------------------------------------- checks

@@ -81,6 +81,7 @@ class RodMaterial:
 STRAIN_MEASURES = ("korner", "bergou")
 MODES = ("dynamic", "quasistatic")
 TRIDIAGONAL_METHODS = ("auto", "thomas", "pcr")
+DUAL_FRAMES = ("root", "pair", "none")
 
 
 @dataclass
@@ -101,9 +102,12 @@ class SolverADMMConfig:
         voronoi_rescaling: use v_1* = e_0 + e_1/2 and its tip mirror for the
             bending Voronoi lengths of the second and penultimate vertices
             (Sec. 5.1 "Cantilever").
-        local_frame_rotation: store the elasticity duals in the root
-            attachment frame Q^t of each strand (Sec. 4.4 "Local frame"), so that
-            warm-started duals follow a rotating head.
+        dual_frame: frame Q in which the elasticity duals lambda_y are stored
+            (Sec. 4.4 "Local frame"): ``"root"`` the root attachment frame of
+            each strand (the paper's choice: warm-started duals follow a
+            rotating head), ``"pair"`` the current material frame of each
+            pair's second edge (the per-vertex frame the paper tried; the duals
+            then follow every edge's rotation), or ``"none"`` (world).
         warm_start_duals: keep lambda_y from one step to the next.  The paper
             is silent; without it, ``local_frame_rotation`` would have no effect.
         air_viscosity: linear drag coefficient xi, force per unit length
@@ -120,7 +124,7 @@ class SolverADMMConfig:
     strain_measure: str = "korner"
     w0: float = 25.0
     voronoi_rescaling: bool = True
-    local_frame_rotation: bool = True
+    dual_frame: str = "root"
     warm_start_duals: bool = True
     air_viscosity: float = 0.0
     tridiagonal: str = "auto"
@@ -139,6 +143,8 @@ class SolverADMMConfig:
             raise ValueError(
                 f"SolverADMMConfig.tridiagonal must be one of {TRIDIAGONAL_METHODS}, got {self.tridiagonal!r}"
             )
+        if self.dual_frame not in DUAL_FRAMES:
+            raise ValueError(f"SolverADMMConfig.dual_frame must be one of {DUAL_FRAMES}, got {self.dual_frame!r}")
         _check_positive("SolverADMMConfig", "w0", self.w0)
         if not (math.isfinite(self.air_viscosity) and self.air_viscosity >= 0):
             raise ValueError(f"SolverADMMConfig.air_viscosity must be >= 0, got {self.air_viscosity!r}")

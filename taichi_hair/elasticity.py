@@ -35,14 +35,27 @@ def dual_to_world(lam: vec6, R: ti.math.mat3) -> vec6:
     return vec6(a[0], a[1], a[2], b[0], b[1], b[2])
 
 
+FRAME_NONE = 0
+FRAME_ROOT = 1
+FRAME_PAIR = 2
+
+
 @ti.func
-def strand_frame(strand: ti.template(), body_rotation: ti.template(), s: int, use_q: ti.template()):
-    """Q^t of Sec. 4.4: the root attachment rotation of strand s (identity if free or disabled)."""
+def dual_frame(frame: ti.template(), strand: ti.template(), body_rotation: ti.template(), es: ti.template(),
+               s: int, i: int):
+    """Rotation Q in which the dual lambda_y of pair i is stored (Sec. 4.4 "Local frame").
+
+    FRAME_ROOT: the root attachment rotation of strand s (the paper's choice);
+    FRAME_PAIR: the current material frame (m1, m2, t) of edge i, the per-vertex
+    frame the paper reports trying; FRAME_NONE: identity (world coordinates).
+    """
     R = ti.Matrix.identity(float, 3)
-    if ti.static(use_q):
+    if ti.static(frame == FRAME_ROOT):
         b = strand.strand_body[s]
         if b >= 0:
             R = body_rotation[b]
+    elif ti.static(frame == FRAME_PAIR):
+        R = ti.Matrix.cols([es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]])
     return R
 
 
@@ -61,7 +74,12 @@ def solve_local_elasticity(
     buf: ti.template(),
     damping_scale: float,
 ):
-    """y_i <- one Gauss-Newton step of Eq. (4) for every edge pair.
+    """y_i <- one Gauss-Newton step of Eq. (4) for every edge pair, then the dual update.
+
+    Since the step starts from y0 = (Bx)_i, y - Bx is the Gauss-Newton
+    increment itself, so the dual update lambda <- lambda + y - Bx of
+    Algorithm 1 is done here too, and the pair's force on the global step,
+    W_y (lambda + y - Bx), is stored in ``buf.pair_force``.
 
     ``damping_scale`` is 1/dt in the dynamic mode and 0 in the quasistatic one;
     tau * damping_scale is the strain-rate damping weight of Sec. 4.4.
@@ -102,8 +120,14 @@ def solve_local_elasticity(
                     H[r + 3, col + 3] += (1.0 + c) * ksb * gb[r] * gb[col]
             # Proximal term w/2 |y - (Bx - lambda)|^2 linearised at y0 = Bx.
             w = buf.pair_admm_weight[i]
-            lam = dual_to_world(buf.pair_dual[i], strand_frame(strand, body_rotation, s, use_q))
+            Q = dual_frame(use_q, strand, body_rotation, es, s, i)
+            lam = dual_to_world(buf.pair_dual[i], Q)
             for r in ti.static(range(6)):
                 H[r, r] += w
             delta = ldlt_solve6(H, -g - w * lam)
-            buf.pair_y[i] = vec6(ea[0], ea[1], ea[2], eb[0], eb[1], eb[2]) + delta
+            # y = Bx + delta.  Fused dual update (Algorithm 1): lambda <- lambda + y - Bx = lambda + delta,
+            # stored back in the frame Q; and the force the global step needs,
+            # W_y (lambda + y - Bx) = W_y (lambda_old + 2 delta), in world coordinates.
+            lam_new = lam + delta
+            buf.pair_dual[i] = dual_to_world(lam_new, Q.transpose())
+            buf.pair_force[i] = w * (lam_new + delta)

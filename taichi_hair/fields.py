@@ -135,8 +135,8 @@ class SolverBuffers:
         #: Begin-of-step strains for strain-rate damping: kappa^t [-] and eps^t [-].
         self.pair_kappa_begin = ti.field(vec3, n)
         self.edge_strain_begin = ti.field(float, n)
-        #: Local-step result y_i = (e_{i-1}, e_i) [m], world frame.
-        self.pair_y = ti.field(vec6, n)
+        #: Force of pair i on the global step, W_y (lambda + y - Bx)_i, world frame [N].
+        self.pair_force = ti.field(vec6, n)
         #: Scaled dual lambda_y [m], in the root-attachment frame Q^t when enabled.
         self.pair_dual = ti.field(vec6, n)
         #: Per-pair twist Hessian (d2/dtheta_a^2, d2/dtheta_b^2, d2/dtheta_a dtheta_b) [J]

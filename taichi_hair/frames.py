@@ -28,6 +28,7 @@ def wrap_angle(a: float) -> float:
 
 @ti.kernel
 def update_reference_frames(
+    with_reference_twist: ti.template(),
     vertex: ti.template(),
     edge: ti.template(),
     pair: ti.template(),
@@ -37,7 +38,11 @@ def update_reference_frames(
     theta: ti.template(),
     es: ti.template(),
 ):
-    """Tangents, reference directors, material directors and reference twists from x and theta."""
+    """Tangents, reference directors, material directors and reference twists from x and theta.
+
+    ``with_reference_twist`` (compile-time) skips the reference twist, which only
+    the Bergou strain needs (Korner's strain reads the material frames directly).
+    """
     for i in x:
         if edge.edge_rest_length[i] > 0.0:
             t_new = (x[i + 1] - x[i]).normalized()
@@ -52,20 +57,24 @@ def update_reference_frames(
             m1, m2 = material_frame(d1, t_new, theta[i])
             es.edge_material_d1[i] = m1
             es.edge_material_d2[i] = m2
-    for i in x:
-        if pair.pair_is_active[i] != 0:
-            t_prev = es.edge_tangent[i - 1]
-            t_cur = es.edge_tangent[i]
-            d1_transported = parallel_transport(es.edge_reference_director[i - 1], t_prev, t_cur)
-            angle = signed_angle(d1_transported, es.edge_reference_director[i], t_cur)
-            old = es.edge_reference_twist[i]
-            es.edge_reference_twist[i] = old + wrap_angle(angle - old)
+    if ti.static(with_reference_twist):
+        for i in x:
+            if pair.pair_is_active[i] != 0:
+                t_prev = es.edge_tangent[i - 1]
+                t_cur = es.edge_tangent[i]
+                d1_transported = parallel_transport(es.edge_reference_director[i - 1], t_prev, t_cur)
+                angle = signed_angle(d1_transported, es.edge_reference_director[i], t_cur)
+                old = es.edge_reference_twist[i]
+                es.edge_reference_twist[i] = old + wrap_angle(angle - old)
 
 
 @ti.kernel
-def update_material_frames(edge: ti.template(), theta: ti.template(), es: ti.template()):
-    """Material directors after a twist update (tangents and reference frames unchanged)."""
+def update_material_frames(edge: ti.template(), theta: ti.template(), es: ti.template(), dtheta: ti.template()):
+    """theta <- theta + dtheta on free edges, then the material directors (tangents and
+    reference frames are unchanged by a twist update)."""
     for i in theta:
+        if edge.edge_is_fixed[i] == 0:
+            theta[i] += dtheta[i]
         if edge.edge_rest_length[i] > 0.0:
             m1, m2 = material_frame(es.edge_reference_director[i], es.edge_tangent[i], theta[i])
             es.edge_material_d1[i] = m1

@@ -55,7 +55,7 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
         s.edge_twist.copy_from(self.edge_rest_twist)
         s.edge_tangent.from_numpy(self.host["edge_rest_tangent"].astype(_np_float()))
         s.edge_reference_director.copy_from(self.edge_rest_director)
-        update_reference_frames(self, self, self, self, self._rest_rotation, s.vertex_position, s.edge_twist, s)
+        update_reference_frames(True, self, self, self, self, self._rest_rotation, s.vertex_position, s.edge_twist, s)
         return s
 
     def control(self) -> Control:

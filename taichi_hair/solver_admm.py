@@ -8,7 +8,7 @@ Per step (Sec. 4.2):
 4. for each ADMM iteration:
    a. local elasticity solve -> y           -- ``elasticity.solve_local_elasticity`` (Sec. 4.4)
    b. feasible projection -> z              -- Sec. 4.5 (contacts issue; slot kept)
-   c. lambda_y <- lambda_y + y - Bx         -- ``admm.update_duals``
+   c. lambda_y <- lambda_y + y - Bx         -- fused into the local step (y - Bx is its increment)
    d. tridiagonal solve M dx = f            -- ``admm.assemble_position_system`` + ``tridiag`` (Sec. 4.3, Eq. 3)
    e. x <- x + dx, update frames
    f. twist Newton step d2E/dth2 dth = -dE/dth -- ``admm.compute_pair_twist_terms`` + ``assemble_twist_system``
@@ -27,7 +27,7 @@ import taichi as ti
 
 from . import admm
 from .config import SolverADMMConfig
-from .elasticity import solve_local_elasticity
+from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, solve_local_elasticity
 from .errors import SimulationDivergedError
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames
@@ -36,7 +36,7 @@ from .state import Control, State
 from .strains import BERGOU, KORNER
 from .tridiag import TridiagonalSolver
 
-STAGES = ("begin", "local", "dual", "global", "frames", "twist", "end")
+STAGES = ("begin", "local", "global", "frames", "twist", "end")
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
 
@@ -63,7 +63,8 @@ class SolverADMM:
                     "clamped (a free strand has no equilibrium under gravity)")
         self.dynamic = cfg.mode == "dynamic"
         self.measure = KORNER if cfg.strain_measure == "korner" else BERGOU
-        self.use_q = bool(cfg.local_frame_rotation)
+        self.with_ref_twist = self.measure == BERGOU
+        self.use_q = {"none": FRAME_NONE, "root": FRAME_ROOT, "pair": FRAME_PAIR}[cfg.dual_frame]
         self.buf = SolverBuffers(model.vertex_count)
         self._bad = ti.field(ti.i32, ())
         self._diag_kappa = ti.Vector.field(3, float, model.vertex_count)
@@ -146,7 +147,7 @@ class SolverADMM:
         if not cfg.warm_start_duals:
             admm.reset_duals(b)
         t0 = self._tock("begin", t0)
-        update_reference_frames(m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist, state)
+        update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist, state)
         t0 = self._tock("frames", t0)
 
         for _ in range(cfg.iterations):
@@ -155,25 +156,21 @@ class SolverADMM:
                                    state.vertex_position, state.edge_twist, state, b, damping_scale)
             t0 = self._tock("local", t0)
             # (b) Feasible projection over z (Sec. 4.5) goes here once contacts exist.
-            # (c) Dual update.
-            admm.update_duals(self.use_q, m, m, m, control.body_rotation, state.vertex_position, b)
-            t0 = self._tock("dual", t0)
+            # (c) The dual update lambda_y += y - Bx is fused into the local step.
             # (d, e) Global tridiagonal solve over x (Sec. 4.3), then frames.
-            admm.assemble_position_system(dyn, self.use_q, m, m, m, m, control.body_rotation,
-                                          state.vertex_position, b, g, v_air, cfg.air_viscosity, dt)
+            admm.assemble_position_system(dyn, m, m, m, state.vertex_position, b, g, v_air, cfg.air_viscosity, dt)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
             admm.apply_position_update(m, state.vertex_position, b)
             t0 = self._tock("global", t0)
-            update_reference_frames(m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist,
-                                    state)
+            update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
+                                    state.edge_twist, state)
             t0 = self._tock("frames", t0)
             # (f, g) Twist Newton step, then material frames.
             admm.compute_pair_twist_terms(self.measure, m, m, m, state.edge_twist, state, b, damping_scale)
             admm.assemble_twist_system(dyn, m, m, state.edge_twist, b, dt)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs1)
-            admm.apply_twist_update(m, state.edge_twist, b)
             t0 = self._tock("twist", t0)
-            update_material_frames(m, state.edge_twist, state)
+            update_material_frames(m, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
             t0 = self._tock("frames", t0)
             self.iteration_count += 1
 
@@ -189,7 +186,7 @@ class SolverADMM:
         code = int(self._bad[None])
         if code >= 0:
             admm.restore_begin(state, state, self.buf)
-            update_reference_frames(self.model, self.model, self.model, self.model, self.model._rest_rotation,
+            update_reference_frames(True, self.model, self.model, self.model, self.model, self.model._rest_rotation,
                                     state.vertex_position, state.edge_twist, state)
             raise SimulationDivergedError(code // 4, _FIELD_NAMES[code % 4], self.step_count)
 
