@@ -169,14 +169,16 @@ def assemble_position_system(
             # B^T r with r_p = W_y (lambda + y - Bx)_p = (ra_p, rb_p) from the local step:
             # vertex i gets ra_i - rb_i from its own pair, rb_{i-1} and -ra_{i+1}
             # (pair_force is zero on inactive pairs).
-            r = buf.pair_force[i]
-            f += vec3(r[0] - r[3], r[1] - r[4], r[2] - r[5])
+            # Distinct names on purpose: Taichi 1.7 miscompiled a local vector reassigned
+            # inside branches here (the first "+=" was lost).
+            r_own = buf.pair_force[i]
+            f += vec3(r_own[0] - r_own[3], r_own[1] - r_own[4], r_own[2] - r_own[5])
             if vertex.vertex_local_index[i] > 0:
-                r = buf.pair_force[i - 1]
-                f += vec3(r[3], r[4], r[5])
+                r_prev = buf.pair_force[i - 1]
+                f += vec3(r_prev[3], r_prev[4], r_prev[5])
             if edge.edge_rest_length[i] > 0.0:
-                r = buf.pair_force[i + 1]
-                f -= vec3(r[0], r[1], r[2])
+                r_next = buf.pair_force[i + 1]
+                f -= vec3(r_next[0], r_next[1], r_next[2])
             buf.tri_lower[i] = lower
             buf.tri_diag[i] = diag
             buf.tri_upper[i] = upper
@@ -226,9 +228,8 @@ def compute_pair_twist_terms(
             e_aa = h_aa + gk.dot(d2_aa)
             e_bb = h_bb + gk.dot(d2_bb)
             e_ab = h_ab + gk.dot(d2_ab)
-            if e_aa >= 0.0 and e_bb >= 0.0 and e_aa * e_bb - e_ab * e_ab >= 0.0:
-                h_aa, h_bb, h_ab = e_aa, e_bb, e_ab
-            buf.pair_twist_hessian[i] = vec3(h_aa, h_bb, h_ab)
+            exact_psd = e_aa >= 0.0 and e_bb >= 0.0 and e_aa * e_bb - e_ab * e_ab >= 0.0
+            buf.pair_twist_hessian[i] = ti.select(exact_psd, vec3(e_aa, e_bb, e_ab), vec3(h_aa, h_bb, h_ab))
             buf.pair_twist_gradient[i] = ti.math.vec2(gk.dot(dk_a), gk.dot(dk_b))
 
 
