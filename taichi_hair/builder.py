@@ -143,73 +143,88 @@ class GroomBuilder:
 
     # ------------------------------------------------------------------ finalize
     def finalize(self) -> Model:
-        """Compute the rest state in float64 and allocate every Taichi field once."""
+        """Compute the rest state in float64 (vectorised over strands) and allocate every field once."""
         if not self._points:
             raise ValueError("GroomBuilder.finalize: no strands were added")
         counts = np.array([p.shape[0] for p in self._points], dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         n = int(counts.sum())
         ns = len(self._points)
+        mats = self._materials
+        strand_of = np.repeat(np.arange(ns), counts)
+        local = np.arange(n) - np.repeat(starts, counts)
+        last = local == np.repeat(counts - 1, counts)  # ghost edge slots
+        pts = np.concatenate(self._points)
+
+        def per_strand(values):
+            return np.array(values, dtype=np.float64)
+
+        area = per_strand([m.area for m in mats])
+        density = per_strand([m.density for m in mats])
+        e_stretch = per_strand([m.youngs_modulus_stretch for m in mats])
+        e_bend = per_strand([m.youngs_modulus_bend for m in mats])
+        polar = per_strand([m.polar_inertia for m in mats])
+        radius = per_strand([m.radius for m in mats])
+        kdiag = np.array([m.stiffness_matrix_diag() for m in mats], dtype=np.float64)
+        bodies = np.array(self._bodies, np.int32)
+
+        # Edges (slot i joins i and i+1; the last slot of each strand is a ghost).
+        edge = np.zeros((n, 3))
+        edge[:-1] = pts[1:] - pts[:-1]
+        edge[last] = 0.0
+        le = np.linalg.norm(edge, axis=1)
+        tangent = np.zeros((n, 3))
+        tangent[~last] = edge[~last] / le[~last, None]
+        # Voronoi lengths: half of each adjacent edge.
+        vor = 0.5 * le
+        prev_le = np.zeros(n)
+        prev_le[1:] = le[:-1]
+        prev_le[local == 0] = 0.0
+        vor = vor + 0.5 * prev_le
+        interior = (local > 0) & ~last
+        sA = area[strand_of]
+
+        # Rest reference frames: space-parallel transport of the root director along each strand,
+        # advanced one local index at a time for all strands at once.
+        dirs = np.zeros((n, 3))
+        root_dirs = np.array(self._directors)
+        dirs[starts] = root_dirs
+        for j in range(1, int(counts.max()) - 1):
+            idx = starts[counts - 1 > j] + j
+            t0, t1, u = tangent[idx - 1], tangent[idx], dirs[idx - 1]
+            b = np.cross(t0, t1)
+            c = np.sum(t0 * t1, axis=1)
+            d = c[:, None] * u + np.cross(b, u) + (np.sum(b * u, axis=1) / (1.0 + c))[:, None] * b
+            d -= np.sum(d * t1, axis=1)[:, None] * t1
+            dirs[idx] = d / np.linalg.norm(d, axis=1)[:, None]
+
+        clamped = bodies[strand_of] >= 0
+        fixed_vertex = clamped & (local <= 1)
         h = {
-            "vertex_mass": np.zeros(n), "vertex_voronoi_length": np.zeros(n),
-            "vertex_strand": np.zeros(n, np.int32), "vertex_local_index": np.zeros(n, np.int32),
-            "vertex_is_fixed": np.zeros(n, np.int32), "vertex_body_position": np.zeros((n, 3)),
-            "vertex_rest_position": np.zeros((n, 3)),
-            "edge_rest_length": np.zeros(n), "edge_stretch_stiffness": np.zeros(n),
-            "edge_rotational_inertia": np.zeros(n), "edge_is_fixed": np.zeros(n, np.int32),
-            "edge_rest_director": np.zeros((n, 3)), "edge_rest_twist": np.zeros(n),
-            "edge_rest_tangent": np.zeros((n, 3)),
-            "pair_is_active": np.zeros(n, np.int32), "pair_bending_modulus": np.zeros((n, 3)),
-            "pair_bending_rigidity": np.zeros(n),
-            "strand_vertex_start": starts.astype(np.int32), "strand_vertex_count": counts.astype(np.int32),
-            "strand_body": np.array(self._bodies, np.int32), "strand_root_director": np.zeros((ns, 3)),
-            "strand_damping_time": np.zeros(ns),
+            "vertex_mass": density[strand_of] * sA * vor,
+            "vertex_voronoi_length": vor,
+            "vertex_strand": strand_of.astype(np.int32),
+            "vertex_local_index": local.astype(np.int32),
+            "vertex_is_fixed": fixed_vertex.astype(np.int32),
+            "vertex_body_position": np.where(fixed_vertex[:, None], pts, 0.0),
+            "vertex_rest_position": pts,
+            "edge_rest_length": le,
+            "edge_stretch_stiffness": e_stretch[strand_of] * sA * le,
+            "edge_rotational_inertia": density[strand_of] * polar[strand_of] * le,
+            "edge_is_fixed": (last | (clamped & (local == 0))).astype(np.int32),
+            "edge_rest_director": dirs,
+            "edge_rest_twist": np.concatenate(self._twists),
+            "edge_rest_tangent": tangent,
+            "pair_is_active": interior.astype(np.int32),
+            "pair_bending_modulus": np.where(interior[:, None], e_bend[strand_of, None] * kdiag[strand_of], 0.0),
+            "pair_bending_rigidity": np.where(interior, e_bend[strand_of] * sA * radius[strand_of] ** 2 / 4.0, 0.0),
+            "strand_vertex_start": starts.astype(np.int32),
+            "strand_vertex_count": counts.astype(np.int32),
+            "strand_body": bodies,
+            "strand_root_director": root_dirs,
+            "strand_damping_time": per_strand([m.damping_time for m in mats]),
             # Host-only per-strand material summary.
-            "strand_radius": np.zeros(ns), "strand_density": np.zeros(ns), "strand_area": np.zeros(ns),
-            "strand_youngs_modulus_bend": np.zeros(ns),
+            "strand_radius": radius, "strand_density": density, "strand_area": area,
+            "strand_youngs_modulus_bend": e_bend,
         }
-        for s, (pts, mat, body, tw, d1) in enumerate(
-                zip(self._points, self._materials, self._bodies, self._twists, self._directors)):
-            a, m = int(starts[s]), int(counts[s])
-            sl = slice(a, a + m)
-            edges = np.diff(pts, axis=0)
-            le = np.linalg.norm(edges, axis=1)
-            t = edges / le[:, None]
-            vor = np.zeros(m)
-            vor[:-1] += 0.5 * le
-            vor[1:] += 0.5 * le
-            A = mat.area
-            Kd = np.array(mat.stiffness_matrix_diag())
-            h["vertex_mass"][sl] = mat.density * A * vor
-            h["vertex_voronoi_length"][sl] = vor
-            h["vertex_strand"][sl] = s
-            h["vertex_local_index"][sl] = np.arange(m)
-            h["vertex_rest_position"][sl] = pts
-            h["edge_rest_length"][a:a + m - 1] = le
-            h["edge_stretch_stiffness"][a:a + m - 1] = mat.youngs_modulus_stretch * A * le
-            h["edge_rotational_inertia"][a:a + m - 1] = mat.density * mat.polar_inertia * le
-            h["edge_is_fixed"][a + m - 1] = 1  # ghost edge
-            h["edge_rest_tangent"][a:a + m - 1] = t
-            h["edge_rest_twist"][sl] = tw
-            # Space-parallel transport of the root director gives the rest reference frames.
-            dirs = np.zeros((m, 3))
-            dirs[0] = d1
-            for j in range(1, m - 1):
-                dj = _transport(dirs[j - 1], t[j - 1], t[j])
-                dj -= np.dot(dj, t[j]) * t[j]
-                dirs[j] = dj / np.linalg.norm(dj)
-            h["edge_rest_director"][sl] = dirs
-            h["pair_is_active"][a + 1:a + m - 1] = 1
-            h["pair_bending_modulus"][a + 1:a + m - 1] = mat.youngs_modulus_bend * Kd
-            h["pair_bending_rigidity"][a + 1:a + m - 1] = mat.youngs_modulus_bend * A * mat.radius**2 / 4.0
-            h["strand_root_director"][s] = d1
-            h["strand_damping_time"][s] = mat.damping_time
-            h["strand_radius"][s] = mat.radius
-            h["strand_density"][s] = mat.density
-            h["strand_area"][s] = A
-            h["strand_youngs_modulus_bend"][s] = mat.youngs_modulus_bend
-            if body >= 0:
-                h["vertex_is_fixed"][a:a + 2] = 1
-                h["vertex_body_position"][a:a + 2] = pts[:2]
-                h["edge_is_fixed"][a] = 1
-        return Model(h, list(self._materials), self.body_count)
+        return Model(h, list(mats), self.body_count)

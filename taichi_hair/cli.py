@@ -1,0 +1,217 @@
+"""The ``taichi-hair`` command line.
+
+    taichi-hair simulate hang --strands 300 --frames 48 --out out/hang
+    taichi-hair validate cantilever --out out/validation
+
+Errors are one readable line on stderr and a non-zero exit code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+
+class CLIError(Exception):
+    """A user-facing error: printed as one line, exit code 2."""
+
+
+# --------------------------------------------------------------------------- helpers
+def _init_taichi(arch: str, precision: str):
+    import taichi as ti
+
+    archs = {"cpu": ti.cpu, "cuda": ti.cuda, "gpu": ti.gpu, "vulkan": ti.vulkan}
+    if arch not in archs:
+        raise CLIError(f"--arch must be one of {sorted(archs)}, got {arch!r}")
+    fp = {"f32": ti.f32, "f64": ti.f64}[precision]
+    ti.init(arch=archs[arch], default_fp=fp, log_level=ti.WARN)
+    used = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
+    return ti, used
+
+
+def _atomic_savez(path: str, **arrays):
+    tmp = path + ".tmp.npz"
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def _add_common(p):
+    p.add_argument("--arch", default="cpu", help="Taichi arch: cpu (default), cuda, gpu, vulkan")
+    p.add_argument("--precision", default="f32", choices=["f32", "f64"], help="floating point precision")
+    p.add_argument("--quiet", action="store_true", help="print only the summary")
+
+
+# --------------------------------------------------------------------------- simulate
+def cmd_simulate(args) -> int:
+    if args.scene != "hang":
+        raise CLIError(f"unknown scene {args.scene!r} (available: hang)")
+    ti, arch = _init_taichi(args.arch, args.precision)
+    from . import SimulationDivergedError, SolverADMM, SolverADMMConfig
+    from .scenes import HangScene, build_hang, nod_rotation
+
+    try:
+        scene = HangScene(strands=args.strands, length=args.length, seed=args.seed)
+        cfg = SolverADMMConfig(iterations=args.iterations, mode="dynamic")
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+    if args.frames < 1 or args.substeps < 1 or args.fps <= 0:
+        raise CLIError("--frames and --substeps must be >= 1 and --fps > 0")
+    os.makedirs(args.out, exist_ok=True)
+    t_build = time.perf_counter()
+    model = build_hang(scene)
+    state, control = model.state(), model.control()
+    solver = SolverADMM(model, cfg)
+    t_build = time.perf_counter() - t_build
+    n = model.vertex_count
+    dt = 1.0 / (args.fps * args.substeps)
+    frames = np.zeros((args.frames + 1, n, 3), np.float32)
+    frames[0] = state.positions()
+    rest_len = model.host["edge_rest_length"]
+    real_edge = rest_len > 0
+    mass = model.host["vertex_mass"]
+    tips = model.host["strand_vertex_start"] + model.host["strand_vertex_count"] - 1
+    stats_rows = []
+    header = f"{'frame':>5} {'time s':>7} {'ms/frame':>9} {'max |v| m/s':>12} {'max stretch %':>13} " \
+             f"{'mean tip y m':>12} {'kinetic J':>11}"
+    if not args.quiet:
+        print(f"hang: {model.strand_count} strands, {n} vertices, arch {arch}, {args.precision}, "
+              f"{args.fps:g} fps x {args.substeps} substeps x {args.iterations} ADMM iterations "
+              f"(set-up {t_build:.2f} s)")
+        print(header)
+    diverged = None
+    t_all = time.perf_counter()
+    completed = 0
+    for f in range(1, args.frames + 1):
+        t0 = time.perf_counter()
+        try:
+            for k in range(args.substeps):
+                t = ((f - 1) * args.substeps + k + 1) * dt
+                control.set_body_transform(0, nod_rotation(scene, t), (0.0, 0.0, 0.0))
+                solver.step(state, control, dt)
+        except SimulationDivergedError as exc:
+            diverged = f"frame {f}: {exc}"
+            break
+        x = state.positions()
+        v = state.vertex_velocity.to_numpy()
+        ms = 1e3 * (time.perf_counter() - t0)
+        e = np.linalg.norm(np.diff(x.astype(np.float64), axis=0, append=x[-1:]), axis=1)
+        stretch = float(np.max(np.abs(e[real_edge] / rest_len[real_edge] - 1.0)))
+        row = dict(frame=f, time=f / args.fps, ms=ms, max_speed=float(np.max(np.linalg.norm(v, axis=1))),
+                   max_stretch_percent=100 * stretch, mean_tip_y=float(np.mean(x[tips, 1])),
+                   kinetic=float(0.5 * np.sum(mass[:, None] * v.astype(np.float64) ** 2)))
+        stats_rows.append(row)
+        frames[f] = x
+        completed = f
+        if not args.quiet:
+            print(f"{f:5d} {row['time']:7.3f} {ms:9.1f} {row['max_speed']:12.4f} {row['max_stretch_percent']:13.4f} "
+                  f"{row['mean_tip_y']:12.5f} {row['kinetic']:11.3e}", flush=True)
+    wall = time.perf_counter() - t_all
+    out_npz = os.path.join(args.out, "frames.npz")
+    _atomic_savez(out_npz, positions=frames[:completed + 1], fps=np.float64(args.fps),
+                  strand_vertex_start=model.host["strand_vertex_start"],
+                  strand_vertex_count=model.host["strand_vertex_count"],
+                  sphere_radius=np.float64(scene.sphere_radius))
+    with open(os.path.join(args.out, "stats.csv"), "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(stats_rows[0].keys()) if stats_rows else ["frame"])
+        w.writeheader()
+        w.writerows(stats_rows)
+    summary = dict(scene="hang", strands=model.strand_count, vertices=n, frames=completed, arch=arch,
+                   precision=args.precision, wall_seconds=wall, setup_seconds=t_build,
+                   ms_per_frame=1e3 * wall / max(completed, 1), diverged=diverged)
+    with open(os.path.join(args.out, "summary.json"), "w") as fh:
+        json.dump(summary, fh, indent=2)
+    print(f"wrote {completed} frames of {n} vertices to {out_npz} "
+          f"({1e3 * wall / max(completed, 1):.1f} ms/frame, {wall:.1f} s)")
+    if diverged:
+        print(f"error: simulation diverged at {diverged}; frames up to {completed} were kept", file=sys.stderr)
+        return 1
+    return 0
+
+
+# --------------------------------------------------------------------------- validate
+def cmd_validate(args) -> int:
+    if args.experiment != "cantilever":
+        raise CLIError(f"unknown experiment {args.experiment!r} (available: cantilever)")
+    ti, arch = _init_taichi(args.arch, args.precision)
+    from .validation.cantilever import default_lengths, format_summary, run_cantilever, write_outputs
+
+    if args.count < 2:
+        raise CLIError("--count must be >= 2")
+
+    def progress(it, change, err):
+        if not args.quiet:
+            print(f"  {it:6d} iterations: max change of H/W over the last chunk {change:.2e}, "
+                  f"max |error| {100 * err:.2f}%", flush=True)
+
+    if not args.quiet:
+        print(f"cantilever: {args.count} rods from 0.5 cm to 128 cm, quasistatic ADMM, w0 = {args.w0:g}, "
+              f"arch {arch}, {args.precision}")
+    result = run_cantilever(default_lengths(args.count), w0=args.w0, max_iterations=args.max_iterations,
+                            progress=progress, voronoi_rescaling=not args.no_voronoi_rescaling,
+                            strain_measure=args.strain_measure)
+    csv_path, png_path = write_outputs(result, args.out)
+    print(format_summary(result))
+    print(f"wrote {csv_path} and {png_path}")
+    if result.max_abs_rel_error > args.tolerance:
+        print(f"error: max relative error {100 * result.max_abs_rel_error:.2f}% exceeds the tolerance "
+              f"{100 * args.tolerance:.2f}%", file=sys.stderr)
+        return 1
+    return 0
+
+
+# --------------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="taichi-hair", description="Hair simulation on Taichi (Daviet 2023 ADMM).")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("simulate", help="run a scene headless and write its frames")
+    s.add_argument("scene", help="scene name (hang)")
+    s.add_argument("--out", required=True, help="output folder (frames.npz, stats.csv, summary.json)")
+    s.add_argument("--strands", type=int, default=300)
+    s.add_argument("--length", type=float, default=0.2, help="strand length [m]")
+    s.add_argument("--frames", type=int, default=48)
+    s.add_argument("--fps", type=float, default=24.0)
+    s.add_argument("--substeps", type=int, default=4)
+    s.add_argument("--iterations", type=int, default=10, help="ADMM iterations per substep")
+    s.add_argument("--seed", type=int, default=0)
+    _add_common(s)
+    s.set_defaults(func=cmd_simulate)
+
+    v = sub.add_parser("validate", help="validation experiments (Daviet 2023 Sec. 5.1)")
+    v.add_argument("experiment", help="experiment name (cantilever)")
+    v.add_argument("--out", required=True, help="output folder")
+    v.add_argument("--count", type=int, default=100, help="number of rod lengths")
+    v.add_argument("--w0", type=float, default=0.2, help="ADMM weight scale for the quasistatic solve")
+    v.add_argument("--max-iterations", type=int, default=20000)
+    v.add_argument("--tolerance", type=float, default=0.02, help="max relative error accepted (exit 1 above)")
+    v.add_argument("--strain-measure", default="korner", choices=["korner", "bergou"])
+    v.add_argument("--no-voronoi-rescaling", action="store_true", help="disable the Sec. 5.1 boundary rescaling")
+    _add_common(v)
+    v.set_defaults(func=cmd_validate)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except CLIError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
