@@ -3,8 +3,8 @@
 ``hang``: strands planted on the lower half of a sphere (a stand-in head),
 growing along the surface normal with a slight natural curl, clamped at the
 root and left to hang under gravity while the sphere nods.  There are no
-contacts yet (Sec. 4.5 is the contacts issue): roots sit below the equator so
-the strands fall away from the sphere rather than through it.
+contacts yet (Sec. 4.5 is the contacts issue): roots sit on the cap y < -0.6 R
+so the strands hang clear of the sphere rather than through it.
 """
 
 from __future__ import annotations
@@ -85,7 +85,8 @@ def build_hang(scene: HangScene, material: RodMaterial | None = None):
     """Builder-made Model for the scene; returns (model, root positions)."""
     rng = np.random.default_rng(scene.seed)
     material = material or RodMaterial()
-    normals = _fibonacci_lower_cap(scene.strands, -0.2)
+    # Roots below 0.6 R under the centre: strands hanging from there clear the sphere.
+    normals = _fibonacci_lower_cap(scene.strands, -0.6)
     n = max(3, int(round(scene.length / scene.edge_length)) + 1)
     b = GroomBuilder()
     for i, nrm in enumerate(normals):

@@ -1,0 +1,181 @@
+"""Benchmark of SolverADMM without contacts (issue: core simulator).
+
+1. Throughput: milliseconds per ADMM iteration and million vertex-iterations
+   per second for 1k x 32, 10k x 32 and 1k x 128 strands x vertices (curly
+   clamped hair under gravity, dynamic mode, 10 iterations per step), and a
+   per-stage split (local, global, twist, frames) from a separate profiled
+   run (profiling synchronises after each stage, so its total is a little
+   higher than the unprofiled figure).
+2. One 10 cm hair rod of 40 edges clamped horizontally (Gamma = 6.8): wall
+   time of the quasistatic ADMM to bring the tip height within 0.1 % of its
+   final value, side by side with MuJoCo's cable (benchmarks/mujoco_cable.py)
+   in the same run.  Kernel compilation is reported apart.
+
+Usage:
+    python benchmarks/bench_admm.py [--arch cpu|cuda] [--sizes 1000x32,10000x32,1000x128] [--out FILE]
+
+Figures are printed and written as JSON (default benchmarks/results/admm_<arch>.json).
+"""
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+
+def curly_groom(ti_hair, strands, vertices, seed=0):
+    rng = np.random.default_rng(seed)
+    b = ti_hair.GroomBuilder()
+    L = 0.0025 * (vertices - 1)
+    s = np.linspace(0.0, L, vertices)
+    side = int(np.ceil(np.sqrt(strands)))
+    for k in range(strands):
+        ph = rng.uniform(0, 2 * np.pi)
+        r = 0.002 * np.minimum(1.0, s / (0.2 * L))
+        pts = np.c_[r * np.cos(s / 0.01 + ph) - r[0] * np.cos(ph), -s, r * np.sin(s / 0.01 + ph)]
+        pts += [0.002 * (k % side), 0.0, 0.002 * (k // side)]
+        b.add_strand(pts)
+    return b.finalize()
+
+
+def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="auto"):
+    model = curly_groom(th, strands, vertices)
+    res = {"strands": strands, "vertices_per_strand": vertices, "vertices": model.vertex_count}
+    cfg = dict(iterations=iterations)
+    if schedule != "auto":
+        cfg["schedule"] = schedule
+    for profile in (False, True):
+        st, ctl = model.state(), model.control()
+        solver = th.SolverADMM(model, th.SolverADMMConfig(**cfg), profile=profile)
+        t0 = time.perf_counter()
+        solver.step(st, ctl, 1 / 96)
+        ti.sync()
+        if not profile:
+            res["compile_and_first_step_s"] = time.perf_counter() - t0
+            res["schedule"] = getattr(solver, "schedule", "stage")
+            res["tridiagonal"] = solver.tridiagonal_method
+        solver.stage_seconds = {k: 0.0 for k in solver.stage_seconds}
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            solver.step(st, ctl, 1 / 96)
+        ti.sync()
+        el = time.perf_counter() - t0
+        its = steps * iterations
+        if profile:
+            res["stage_ms_per_iteration"] = {k: 1e3 * v / its for k, v in solver.stage_seconds.items() if v > 0}
+        else:
+            res["ms_per_iteration"] = 1e3 * el / its
+            res["mvertex_iterations_per_s"] = model.vertex_count * its / el / 1e6
+    return res
+
+
+def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto"):
+    """Quasistatic ADMM: iterations and wall time until the tip height stays within rel_tol of its final value."""
+    n, L = 41, 0.1
+
+    def make():
+        b = th.GroomBuilder()
+        b.add_strand(np.c_[np.linspace(0, L, n), np.zeros(n), np.zeros(n)], th.RodMaterial())
+        model = b.finalize()
+        cfg = dict(iterations=chunk, mode="quasistatic", w0=w0)
+        if schedule != "auto":
+            cfg["schedule"] = schedule
+        return model, th.SolverADMM(model, th.SolverADMMConfig(**cfg))
+
+    # Pass 1 (untimed): the final tip height, then the first chunk after which it stays within rel_tol.
+    model, solver = make()
+    st, ctl = model.state(), model.control()
+    straight = st.to_numpy()
+    heights = []
+    t0 = time.perf_counter()
+    solver.step(st, ctl, 1.0)
+    compile_s = time.perf_counter() - t0
+    heights.append(st.positions()[-1, 1])
+    for _ in range(4000):
+        solver.step(st, ctl, 1.0)
+        heights.append(float(st.positions()[-1, 1]))
+        if len(heights) > 200 and abs(heights[-1] - heights[-101]) < 1e-7 * abs(heights[-1]):
+            break
+    h = np.array(heights)
+    final = h[-1]
+    outside = np.where(np.abs(h / final - 1.0) > rel_tol)[0]
+    chunks = int(outside[-1]) + 2 if outside.size else 1
+    # Pass 2 (timed): exactly that many chunks from the straight state, compiled already.
+    timings = []
+    for _ in range(5):
+        st.load(straight)  # same fields: no recompilation
+        solver.reset_duals()
+        ti.sync()
+        t0 = time.perf_counter()
+        for _ in range(chunks):
+            solver.step(st, ctl, 1.0)
+        ti.sync()
+        timings.append(time.perf_counter() - t0)
+    tip = float(st.positions()[-1, 1])
+    return {"iterations": chunks * chunk, "wall_s": float(np.median(timings)), "compile_s": compile_s,
+            "final_tip_drop_m": -float(final), "tip_drop_m_after_timed_run": -tip, "w0": w0,
+            "iterations_per_call": chunk}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--arch", default="cpu")
+    p.add_argument("--sizes", default="1000x32,10000x32,1000x128")
+    p.add_argument("--schedule", default="auto")
+    p.add_argument("--no-mujoco", action="store_true")
+    p.add_argument("--out", default=None)
+    args = p.parse_args(argv)
+    import taichi as ti
+
+    ti.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], log_level=ti.WARN)
+    import taichi_hair as th
+
+    arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
+    out = {"date": time.strftime("%Y-%m-%d"), "arch": arch, "machine": platform.processor() or platform.machine(),
+           "cpu_count": os.cpu_count(), "python": platform.python_version(), "taichi": ti.__version__,
+           "throughput": []}
+    print(f"SolverADMM benchmark on {arch} ({os.cpu_count()} cores), taichi {ti.__version__}")
+    print(f"{'strands x verts':>16} {'ms/iter':>9} {'Mvert-it/s':>11} {'compile s':>10}  stage ms/iter")
+    for size in args.sizes.split(","):
+        ns, nv = (int(v) for v in size.split("x"))
+        r = throughput(th, ti, ns, nv, schedule=args.schedule)
+        out["throughput"].append(r)
+        stages = " ".join(f"{k}={v:.2f}" for k, v in r["stage_ms_per_iteration"].items())
+        print(f"{size:>16} {r['ms_per_iteration']:9.3f} {r['mvertex_iterations_per_s']:11.2f} "
+              f"{r['compile_and_first_step_s']:10.2f}  {stages}", flush=True)
+    rest = rod_to_rest(th, ti, schedule=args.schedule)
+    out["rod_to_rest"] = rest
+    print(f"10 cm rod, 40 edges, to rest within 0.1% (quasistatic ADMM, w0={rest['w0']}): "
+          f"{rest['iterations']} iterations, {1e3 * rest['wall_s']:.2f} ms wall (compile {rest['compile_s']:.2f} s), "
+          f"tip drop {1e3 * rest['final_tip_drop_m']:.3f} mm")
+    if not args.no_mujoco:
+        try:
+            import mujoco_cable  # noqa: F401  (benchmarks/ is on sys.path when run as a script)
+        except ImportError:
+            sys.path.insert(0, HERE)
+        try:
+            import mujoco_cable
+
+            mj = mujoco_cable.time_to_rest()
+            out["mujoco_rod_to_rest"] = mj
+            print(f"MuJoCo cable, same rod: {mj['steps']} steps, {1e3 * mj['wall_s']:.2f} ms wall "
+                  f"(compile {1e3 * mj['compile_s']:.1f} ms), tip drop {1e3 * mj['final_tip_drop_m']:.3f} mm; "
+                  f"ratio ADMM/MuJoCo wall time = {rest['wall_s'] / mj['wall_s']:.1f}")
+        except ImportError as exc:
+            print(f"MuJoCo comparison skipped: {exc}")
+    path = args.out or os.path.join(HERE, "results", f"admm_{arch}.json")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as fh:
+        json.dump(out, fh, indent=2)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
