@@ -1,6 +1,19 @@
 """ADMM stage kernels of Algorithm 1 (Daviet 2023), contacts excepted.
 
-Each kernel is one stage; ``solver_admm.SolverADMM.step`` sequences them.
+Each kernel is one stage; ``solver_admm.SolverADMM.step`` sequences them
+(the "stage" schedule).  The per-index body of each stage is a ``ti.func``
+(``*_at``) so that ``schedule_strand`` can run the same arithmetic strand by
+strand inside one kernel (the "strand" schedule).
+
+Bit-identity of the two schedules: under Taichi's fast math, LLVM fuses a
+multiply and an add into one FMA only where the product has a single use, so
+the rounding of an expression can depend on what the compiler managed to
+share with the surrounding code.  The ``*_at`` functions therefore take the
+index and the scalars as *typed* arguments (local copies, the same in both
+kernels) rather than passing the enclosing kernel's arguments through: with
+pass-through arguments the two schedules differed in the last bits (Korner
+twist terms).  ``tests/test_schedules.py`` guards the identity.
+
 Arguments read as dataflow: model groups, state, scalars, outputs.
 
 Units: the incremental problem is written in energy units [J], so the
@@ -115,6 +128,74 @@ def reset_duals(buf: ti.template()):
 
 
 # --------------------------------------------------------------------------- global step (Sec. 4.3)
+@ti.func
+def assemble_position_at(
+    i: ti.i32,
+    dynamic: ti.template(),
+    vertex: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    x: ti.template(),
+    buf: ti.template(),
+    gravity: vec3,
+    air_velocity: vec3,
+    air_viscosity: float,
+    dt: float,
+):
+    """Row i of the position system (see :func:`assemble_position_system`).
+
+    Reads ``buf.pair_force`` of pairs i-1, i and i+1: the local step must be done
+    on the whole strand first.
+    """
+    if vertex.vertex_is_fixed[i] != 0:
+        buf.tri_lower[i] = 0.0
+        buf.tri_diag[i] = 1.0
+        buf.tri_upper[i] = 0.0
+        buf.tri_rhs3[i] = vec3(0.0)
+    else:
+        m = vertex.vertex_mass[i]
+        diag = 0.0
+        f = m * gravity
+        if ti.static(dynamic):
+            inv_dt = 1.0 / dt
+            diag += m * inv_dt * inv_dt
+            x_pred = buf.vertex_position_begin[i] + dt * buf.vertex_velocity_begin[i]
+            f -= m * inv_dt * inv_dt * (x[i] - x_pred)
+            xi = air_viscosity * vertex.vertex_voronoi_length[i]
+            diag += xi * inv_dt
+            f -= xi * ((x[i] - buf.vertex_position_begin[i]) * inv_dt - air_velocity)
+        # Edge (i-1, i): weight from pairs i-1 and i.
+        lower = 0.0
+        if vertex.vertex_local_index[i] > 0:
+            we = buf.pair_admm_weight[i - 1] * pair.pair_is_active[i - 1] + buf.pair_admm_weight[i] * pair.pair_is_active[i]
+            diag += we
+            if vertex.vertex_is_fixed[i - 1] == 0:
+                lower = -we
+        upper = 0.0
+        if edge.edge_rest_length[i] > 0.0:
+            we = buf.pair_admm_weight[i] * pair.pair_is_active[i] + buf.pair_admm_weight[i + 1] * pair.pair_is_active[i + 1]
+            diag += we
+            if vertex.vertex_is_fixed[i + 1] == 0:
+                upper = -we
+        # B^T r with r_p = W_y (lambda + y - Bx)_p = (ra_p, rb_p) from the local step:
+        # vertex i gets ra_i - rb_i from its own pair, rb_{i-1} and -ra_{i+1}
+        # (pair_force is zero on inactive pairs).
+        # Distinct names on purpose: Taichi 1.7 miscompiled a local vector reassigned
+        # inside branches here (the first "+=" was lost).
+        r_own = buf.pair_force[i]
+        f += vec3(r_own[0] - r_own[3], r_own[1] - r_own[4], r_own[2] - r_own[5])
+        if vertex.vertex_local_index[i] > 0:
+            r_prev = buf.pair_force[i - 1]
+            f += vec3(r_prev[3], r_prev[4], r_prev[5])
+        if edge.edge_rest_length[i] > 0.0:
+            r_next = buf.pair_force[i + 1]
+            f -= vec3(r_next[0], r_next[1], r_next[2])
+        buf.tri_lower[i] = lower
+        buf.tri_diag[i] = diag
+        buf.tri_upper[i] = upper
+        buf.tri_rhs3[i] = f
+
+
 @ti.kernel
 def assemble_position_system(
     dynamic: ti.template(),
@@ -136,64 +217,58 @@ def assemble_position_system(
     identity row and no coupling (the projections Pi_A of Eq. 3).
     """
     for i in x:
-        if vertex.vertex_is_fixed[i] != 0:
-            buf.tri_lower[i] = 0.0
-            buf.tri_diag[i] = 1.0
-            buf.tri_upper[i] = 0.0
-            buf.tri_rhs3[i] = vec3(0.0)
-        else:
-            m = vertex.vertex_mass[i]
-            diag = 0.0
-            f = m * gravity
-            if ti.static(dynamic):
-                inv_dt = 1.0 / dt
-                diag += m * inv_dt * inv_dt
-                x_pred = buf.vertex_position_begin[i] + dt * buf.vertex_velocity_begin[i]
-                f -= m * inv_dt * inv_dt * (x[i] - x_pred)
-                xi = air_viscosity * vertex.vertex_voronoi_length[i]
-                diag += xi * inv_dt
-                f -= xi * ((x[i] - buf.vertex_position_begin[i]) * inv_dt - air_velocity)
-            # Edge (i-1, i): weight from pairs i-1 and i.
-            lower = 0.0
-            if vertex.vertex_local_index[i] > 0:
-                we = buf.pair_admm_weight[i - 1] * pair.pair_is_active[i - 1] + buf.pair_admm_weight[i] * pair.pair_is_active[i]
-                diag += we
-                if vertex.vertex_is_fixed[i - 1] == 0:
-                    lower = -we
-            upper = 0.0
-            if edge.edge_rest_length[i] > 0.0:
-                we = buf.pair_admm_weight[i] * pair.pair_is_active[i] + buf.pair_admm_weight[i + 1] * pair.pair_is_active[i + 1]
-                diag += we
-                if vertex.vertex_is_fixed[i + 1] == 0:
-                    upper = -we
-            # B^T r with r_p = W_y (lambda + y - Bx)_p = (ra_p, rb_p) from the local step:
-            # vertex i gets ra_i - rb_i from its own pair, rb_{i-1} and -ra_{i+1}
-            # (pair_force is zero on inactive pairs).
-            # Distinct names on purpose: Taichi 1.7 miscompiled a local vector reassigned
-            # inside branches here (the first "+=" was lost).
-            r_own = buf.pair_force[i]
-            f += vec3(r_own[0] - r_own[3], r_own[1] - r_own[4], r_own[2] - r_own[5])
-            if vertex.vertex_local_index[i] > 0:
-                r_prev = buf.pair_force[i - 1]
-                f += vec3(r_prev[3], r_prev[4], r_prev[5])
-            if edge.edge_rest_length[i] > 0.0:
-                r_next = buf.pair_force[i + 1]
-                f -= vec3(r_next[0], r_next[1], r_next[2])
-            buf.tri_lower[i] = lower
-            buf.tri_diag[i] = diag
-            buf.tri_upper[i] = upper
-            buf.tri_rhs3[i] = f
+        assemble_position_at(i, dynamic, vertex, edge, pair, x, buf, gravity, air_velocity, air_viscosity, dt)
+
+
+@ti.func
+def apply_position_update_at(i: ti.i32, vertex: ti.template(), x: ti.template(), buf: ti.template()):
+    """x[i] <- x[i] + dx[i] if vertex i is free."""
+    if vertex.vertex_is_fixed[i] == 0:
+        x[i] += buf.tri_rhs3[i]
 
 
 @ti.kernel
 def apply_position_update(vertex: ti.template(), x: ti.template(), buf: ti.template()):
     """x <- x + dx for free vertices (the solution sits in tri_rhs3)."""
     for i in x:
-        if vertex.vertex_is_fixed[i] == 0:
-            x[i] += buf.tri_rhs3[i]
+        apply_position_update_at(i, vertex, x, buf)
 
 
 # --------------------------------------------------------------------------- twist step
+@ti.func
+def pair_twist_terms_at(
+    i: ti.i32,
+    measure: ti.template(),
+    vertex: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+    buf: ti.template(),
+    damping_scale: float,
+):
+    """Twist gradient and Hessian of pair i (see :func:`compute_pair_twist_terms`)."""
+    if pair.pair_is_active[i] != 0:
+        a = i - 1
+        m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
+        m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
+        twist = theta[i] - theta[a] + es.edge_reference_twist[i]
+        kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
+        dk_a, dk_b, d2_aa, d2_bb, d2_ab = pair_twist_derivatives(measure, kappa, m1a, m2a, ta, m1b, m2b, tb)
+        c = strand.strand_damping_time[vertex.vertex_strand[i]] * damping_scale
+        k = buf.pair_bend_stiffness[i]
+        gk = k * ((kappa - buf.pair_rest_kappa[i]) + c * (kappa - buf.pair_kappa_begin[i]))
+        h_aa = (1.0 + c) * (k * dk_a).dot(dk_a)
+        h_bb = (1.0 + c) * (k * dk_b).dot(dk_b)
+        h_ab = (1.0 + c) * (k * dk_a).dot(dk_b)
+        e_aa = h_aa + gk.dot(d2_aa)
+        e_bb = h_bb + gk.dot(d2_bb)
+        e_ab = h_ab + gk.dot(d2_ab)
+        exact_psd = e_aa >= 0.0 and e_bb >= 0.0 and e_aa * e_bb - e_ab * e_ab >= 0.0
+        buf.pair_twist_hessian[i] = ti.select(exact_psd, vec3(e_aa, e_bb, e_ab), vec3(h_aa, h_bb, h_ab))
+        buf.pair_twist_gradient[i] = ti.math.vec2(gk.dot(dk_a), gk.dot(dk_b))
+
+
 @ti.kernel
 def compute_pair_twist_terms(
     measure: ti.template(),
@@ -212,25 +287,55 @@ def compute_pair_twist_terms(
     system stays SPD far from rest.
     """
     for i in theta:
-        if pair.pair_is_active[i] != 0:
-            a = i - 1
-            m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
-            m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
-            twist = theta[i] - theta[a] + es.edge_reference_twist[i]
-            kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
-            dk_a, dk_b, d2_aa, d2_bb, d2_ab = pair_twist_derivatives(measure, kappa, m1a, m2a, ta, m1b, m2b, tb)
-            c = strand.strand_damping_time[vertex.vertex_strand[i]] * damping_scale
-            k = buf.pair_bend_stiffness[i]
-            gk = k * ((kappa - buf.pair_rest_kappa[i]) + c * (kappa - buf.pair_kappa_begin[i]))
-            h_aa = (1.0 + c) * (k * dk_a).dot(dk_a)
-            h_bb = (1.0 + c) * (k * dk_b).dot(dk_b)
-            h_ab = (1.0 + c) * (k * dk_a).dot(dk_b)
-            e_aa = h_aa + gk.dot(d2_aa)
-            e_bb = h_bb + gk.dot(d2_bb)
-            e_ab = h_ab + gk.dot(d2_ab)
-            exact_psd = e_aa >= 0.0 and e_bb >= 0.0 and e_aa * e_bb - e_ab * e_ab >= 0.0
-            buf.pair_twist_hessian[i] = ti.select(exact_psd, vec3(e_aa, e_bb, e_ab), vec3(h_aa, h_bb, h_ab))
-            buf.pair_twist_gradient[i] = ti.math.vec2(gk.dot(dk_a), gk.dot(dk_b))
+        pair_twist_terms_at(i, measure, vertex, pair, strand, theta, es, buf, damping_scale)
+
+
+@ti.func
+def assemble_twist_at(
+    j: ti.i32,
+    dynamic: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    theta: ti.template(),
+    buf: ti.template(),
+    dt: float,
+):
+    """Row j of the twist system (see :func:`assemble_twist_system`).
+
+    Reads the twist terms of pairs j and j+1.
+    """
+    if edge.edge_is_fixed[j] != 0:
+        buf.tri_lower[j] = 0.0
+        buf.tri_diag[j] = 1.0
+        buf.tri_upper[j] = 0.0
+        buf.tri_rhs1[j] = 0.0
+    else:
+        diag = 0.0
+        g = 0.0
+        lower = 0.0
+        upper = 0.0
+        # Distinct names for the two pairs' Hessians (see the Taichi 1.7 note above).
+        if pair.pair_is_active[j] != 0:
+            h_own = buf.pair_twist_hessian[j]
+            diag += h_own[1]
+            g += buf.pair_twist_gradient[j][1]
+            if edge.edge_is_fixed[j - 1] == 0:
+                lower = h_own[2]
+        if pair.pair_is_active[j + 1] != 0:
+            h_next = buf.pair_twist_hessian[j + 1]
+            diag += h_next[0]
+            g += buf.pair_twist_gradient[j + 1][0]
+            if edge.edge_is_fixed[j + 1] == 0:
+                upper = h_next[2]
+        if ti.static(dynamic):
+            inertia = edge.edge_rotational_inertia[j] / (dt * dt)
+            diag += inertia
+            pred = buf.edge_twist_begin[j] + dt * buf.edge_angular_velocity_begin[j]
+            g += inertia * (theta[j] - pred)
+        buf.tri_lower[j] = lower
+        buf.tri_diag[j] = diag
+        buf.tri_upper[j] = upper
+        buf.tri_rhs1[j] = -g
 
 
 @ti.kernel
@@ -248,37 +353,7 @@ def assemble_twist_system(
     Kinematic twists (clamped root edge, ghost edge) get identity rows.
     """
     for j in theta:
-        if edge.edge_is_fixed[j] != 0:
-            buf.tri_lower[j] = 0.0
-            buf.tri_diag[j] = 1.0
-            buf.tri_upper[j] = 0.0
-            buf.tri_rhs1[j] = 0.0
-        else:
-            diag = 0.0
-            g = 0.0
-            lower = 0.0
-            upper = 0.0
-            if pair.pair_is_active[j] != 0:
-                h = buf.pair_twist_hessian[j]
-                diag += h[1]
-                g += buf.pair_twist_gradient[j][1]
-                if edge.edge_is_fixed[j - 1] == 0:
-                    lower = h[2]
-            if pair.pair_is_active[j + 1] != 0:
-                h = buf.pair_twist_hessian[j + 1]
-                diag += h[0]
-                g += buf.pair_twist_gradient[j + 1][0]
-                if edge.edge_is_fixed[j + 1] == 0:
-                    upper = h[2]
-            if ti.static(dynamic):
-                inertia = edge.edge_rotational_inertia[j] / (dt * dt)
-                diag += inertia
-                pred = buf.edge_twist_begin[j] + dt * buf.edge_angular_velocity_begin[j]
-                g += inertia * (theta[j] - pred)
-            buf.tri_lower[j] = lower
-            buf.tri_diag[j] = diag
-            buf.tri_upper[j] = upper
-            buf.tri_rhs1[j] = -g
+        assemble_twist_at(j, dynamic, edge, pair, theta, buf, dt)
 
 
 # --------------------------------------------------------------------------- checks

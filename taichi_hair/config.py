@@ -82,6 +82,7 @@ STRAIN_MEASURES = ("korner", "bergou")
 MODES = ("dynamic", "quasistatic")
 TRIDIAGONAL_METHODS = ("auto", "thomas", "pcr")
 DUAL_FRAMES = ("root", "pair", "none")
+SCHEDULES = ("auto", "stage", "strand")
 
 
 @dataclass
@@ -115,6 +116,16 @@ class SolverADMMConfig:
         tridiagonal: ``"thomas"`` (per-strand sequential, best on CPU),
             ``"pcr"`` (parallel cyclic reduction; strand blocks in shared
             memory on CUDA), or ``"auto"`` (Thomas on CPU, PCR on GPU).
+            The strand schedule always uses Thomas: ``"pcr"`` with
+            ``schedule="strand"`` is an error.
+        schedule: how the ADMM iterations of a step are launched (same
+            results; see :mod:`taichi_hair.schedule_strand`): ``"stage"``
+            runs each stage as a kernel parallel over all vertices (about nine
+            launches per iteration; suits GPUs), ``"strand"`` runs all
+            iterations in one kernel parallel over strands, each strand's
+            stages serially (suits CPUs; bit-identical to ``"stage"`` on CPU),
+            ``"auto"`` picks ``"strand"`` on CPU and ``"stage"`` on GPU archs
+            (and ``"stage"`` when ``tridiagonal="pcr"`` is asked for).
         check_finite: after each step, check every state value for NaN/inf
             and raise :class:`SimulationDivergedError` naming the strand.
     """
@@ -128,6 +139,7 @@ class SolverADMMConfig:
     warm_start_duals: bool = True
     air_viscosity: float = 0.0
     tridiagonal: str = "auto"
+    schedule: str = "auto"
     check_finite: bool = True
 
     def __post_init__(self):
@@ -142,6 +154,13 @@ class SolverADMMConfig:
         if self.tridiagonal not in TRIDIAGONAL_METHODS:
             raise ValueError(
                 f"SolverADMMConfig.tridiagonal must be one of {TRIDIAGONAL_METHODS}, got {self.tridiagonal!r}"
+            )
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"SolverADMMConfig.schedule must be one of {SCHEDULES}, got {self.schedule!r}")
+        if self.schedule == "strand" and self.tridiagonal == "pcr":
+            raise ValueError(
+                "SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule='strand' "
+                "(the strand schedule solves each strand with Thomas); use schedule='stage' or 'auto'"
             )
         if self.dual_frame not in DUAL_FRAMES:
             raise ValueError(f"SolverADMMConfig.dual_frame must be one of {DUAL_FRAMES}, got {self.dual_frame!r}")

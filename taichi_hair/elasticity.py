@@ -59,6 +59,75 @@ def dual_frame(frame: ti.template(), strand: ti.template(), body_rotation: ti.te
     return R
 
 
+@ti.func
+def local_elasticity_at(
+    i: ti.i32,
+    measure: ti.template(),
+    use_q: ti.template(),
+    vertex: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+    buf: ti.template(),
+    damping_scale: float,
+):
+    """Local step of pair i (nothing on inactive pairs): see :func:`solve_local_elasticity`.
+
+    Reads x[i-1..i+1], the frames of edges i-1 and i, theta and the reference
+    twist of pair i; writes ``buf.pair_dual[i]`` and ``buf.pair_force[i]``.
+    """
+    if pair.pair_is_active[i] != 0:
+        a = i - 1
+        ea = x[i] - x[a]
+        eb = x[i + 1] - x[i]
+        m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
+        m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
+        twist = theta[i] - theta[a] + es.edge_reference_twist[i]
+        kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
+        J = pair_edge_jacobian(measure, m1a, m2a, ta, ea.norm(), m1b, m2b, tb, eb.norm())
+        s = vertex.vertex_strand[i]
+        c = strand.strand_damping_time[s] * damping_scale
+        k = buf.pair_bend_stiffness[i]
+        # Bending + bending damping (Gauss-Newton: J^T K J).
+        gk = k * ((kappa - buf.pair_rest_kappa[i]) + c * (kappa - buf.pair_kappa_begin[i]))
+        KJ = mat36(0.0)
+        for r in ti.static(range(3)):
+            for col in ti.static(range(6)):
+                KJ[r, col] = k[r] * J[r, col]
+        H = (1.0 + c) * (J.transpose() @ KJ)
+        g = J.transpose() @ gk
+        # Stretching of both edges (+ damping), stiffness halved on shared edges.
+        eps_a, ga = stretch_strain(measure, ea, edge.edge_rest_length[a])
+        eps_b, gb = stretch_strain(measure, eb, edge.edge_rest_length[i])
+        ksa = buf.edge_pair_stretch_stiffness[a]
+        ksb = buf.edge_pair_stretch_stiffness[i]
+        fa = ksa * (eps_a + c * (eps_a - buf.edge_strain_begin[a]))
+        fb = ksb * (eps_b + c * (eps_b - buf.edge_strain_begin[i]))
+        for r in ti.static(range(3)):
+            g[r] += fa * ga[r]
+            g[r + 3] += fb * gb[r]
+            for col in ti.static(range(3)):
+                H[r, col] += (1.0 + c) * ksa * ga[r] * ga[col]
+                H[r + 3, col + 3] += (1.0 + c) * ksb * gb[r] * gb[col]
+        # Proximal term w/2 |y - (Bx - lambda)|^2 linearised at y0 = Bx.
+        w = buf.pair_admm_weight[i]
+        Q = dual_frame(use_q, strand, body_rotation, es, s, i)
+        lam = dual_to_world(buf.pair_dual[i], Q)
+        for r in ti.static(range(6)):
+            H[r, r] += w
+        delta = ldlt_solve6(H, -g - w * lam)
+        # y = Bx + delta.  Fused dual update (Algorithm 1): lambda <- lambda + y - Bx = lambda + delta,
+        # stored back in the frame Q; and the force the global step needs,
+        # W_y (lambda + y - Bx) = W_y (lambda_old + 2 delta), in world coordinates.
+        lam_new = lam + delta
+        buf.pair_dual[i] = dual_to_world(lam_new, Q.transpose())
+        buf.pair_force[i] = w * (lam_new + delta)
+
+
 @ti.kernel
 def solve_local_elasticity(
     measure: ti.template(),
@@ -85,49 +154,5 @@ def solve_local_elasticity(
     tau * damping_scale is the strain-rate damping weight of Sec. 4.4.
     """
     for i in x:
-        if pair.pair_is_active[i] != 0:
-            a = i - 1
-            ea = x[i] - x[a]
-            eb = x[i + 1] - x[i]
-            m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
-            m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
-            twist = theta[i] - theta[a] + es.edge_reference_twist[i]
-            kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
-            J = pair_edge_jacobian(measure, m1a, m2a, ta, ea.norm(), m1b, m2b, tb, eb.norm())
-            s = vertex.vertex_strand[i]
-            c = strand.strand_damping_time[s] * damping_scale
-            k = buf.pair_bend_stiffness[i]
-            # Bending + bending damping (Gauss-Newton: J^T K J).
-            gk = k * ((kappa - buf.pair_rest_kappa[i]) + c * (kappa - buf.pair_kappa_begin[i]))
-            KJ = mat36(0.0)
-            for r in ti.static(range(3)):
-                for col in ti.static(range(6)):
-                    KJ[r, col] = k[r] * J[r, col]
-            H = (1.0 + c) * (J.transpose() @ KJ)
-            g = J.transpose() @ gk
-            # Stretching of both edges (+ damping), stiffness halved on shared edges.
-            eps_a, ga = stretch_strain(measure, ea, edge.edge_rest_length[a])
-            eps_b, gb = stretch_strain(measure, eb, edge.edge_rest_length[i])
-            ksa = buf.edge_pair_stretch_stiffness[a]
-            ksb = buf.edge_pair_stretch_stiffness[i]
-            fa = ksa * (eps_a + c * (eps_a - buf.edge_strain_begin[a]))
-            fb = ksb * (eps_b + c * (eps_b - buf.edge_strain_begin[i]))
-            for r in ti.static(range(3)):
-                g[r] += fa * ga[r]
-                g[r + 3] += fb * gb[r]
-                for col in ti.static(range(3)):
-                    H[r, col] += (1.0 + c) * ksa * ga[r] * ga[col]
-                    H[r + 3, col + 3] += (1.0 + c) * ksb * gb[r] * gb[col]
-            # Proximal term w/2 |y - (Bx - lambda)|^2 linearised at y0 = Bx.
-            w = buf.pair_admm_weight[i]
-            Q = dual_frame(use_q, strand, body_rotation, es, s, i)
-            lam = dual_to_world(buf.pair_dual[i], Q)
-            for r in ti.static(range(6)):
-                H[r, r] += w
-            delta = ldlt_solve6(H, -g - w * lam)
-            # y = Bx + delta.  Fused dual update (Algorithm 1): lambda <- lambda + y - Bx = lambda + delta,
-            # stored back in the frame Q; and the force the global step needs,
-            # W_y (lambda + y - Bx) = W_y (lambda_old + 2 delta), in world coordinates.
-            lam_new = lam + delta
-            buf.pair_dual[i] = dual_to_world(lam_new, Q.transpose())
-            buf.pair_force[i] = w * (lam_new + delta)
+        local_elasticity_at(i, measure, use_q, vertex, edge, pair, strand, body_rotation, x, theta, es, buf,
+                            damping_scale)

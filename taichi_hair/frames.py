@@ -26,6 +26,59 @@ def wrap_angle(a: float) -> float:
     return a - two_pi * ti.round(a / two_pi)
 
 
+@ti.func
+def reference_frame_at(
+    i: ti.i32,
+    vertex: ti.template(),
+    edge: ti.template(),
+    strand: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+):
+    """Edge i: tangent from x[i], x[i+1], time-parallel transported reference director
+    (the body's for a clamped root edge), material directors.  Nothing on ghost edges."""
+    if edge.edge_rest_length[i] > 0.0:
+        t_new = (x[i + 1] - x[i]).normalized()
+        d1 = parallel_transport(es.edge_reference_director[i], es.edge_tangent[i], t_new)
+        s = vertex.vertex_strand[i]
+        b = strand.strand_body[s]
+        if vertex.vertex_local_index[i] == 0 and b >= 0:
+            d1 = body_rotation[b] @ strand.strand_root_director[s]
+        d1 = (d1 - d1.dot(t_new) * t_new).normalized()
+        es.edge_tangent[i] = t_new
+        es.edge_reference_director[i] = d1
+        m1, m2 = material_frame(d1, t_new, theta[i])
+        es.edge_material_d1[i] = m1
+        es.edge_material_d2[i] = m2
+
+
+@ti.func
+def reference_twist_at(i: ti.i32, pair: ti.template(), es: ti.template()):
+    """Reference twist of pair i, continuous in time.  Needs the tangents and reference
+    directors of edges i-1 and i up to date (:func:`reference_frame_at` on both first)."""
+    if pair.pair_is_active[i] != 0:
+        t_prev = es.edge_tangent[i - 1]
+        t_cur = es.edge_tangent[i]
+        d1_transported = parallel_transport(es.edge_reference_director[i - 1], t_prev, t_cur)
+        angle = signed_angle(d1_transported, es.edge_reference_director[i], t_cur)
+        old = es.edge_reference_twist[i]
+        es.edge_reference_twist[i] = old + wrap_angle(angle - old)
+
+
+@ti.func
+def material_frame_at(i: ti.i32, edge: ti.template(), theta: ti.template(), es: ti.template(),
+                      dtheta: ti.template()):
+    """Edge i: theta <- theta + dtheta if free, then the material directors."""
+    if edge.edge_is_fixed[i] == 0:
+        theta[i] += dtheta[i]
+    if edge.edge_rest_length[i] > 0.0:
+        m1, m2 = material_frame(es.edge_reference_director[i], es.edge_tangent[i], theta[i])
+        es.edge_material_d1[i] = m1
+        es.edge_material_d2[i] = m2
+
+
 @ti.kernel
 def update_reference_frames(
     with_reference_twist: ti.template(),
@@ -42,30 +95,13 @@ def update_reference_frames(
 
     ``with_reference_twist`` (compile-time) skips the reference twist, which only
     the Bergou strain needs (Korner's strain reads the material frames directly).
+    The reference twists need every tangent updated first: two loops.
     """
     for i in x:
-        if edge.edge_rest_length[i] > 0.0:
-            t_new = (x[i + 1] - x[i]).normalized()
-            d1 = parallel_transport(es.edge_reference_director[i], es.edge_tangent[i], t_new)
-            s = vertex.vertex_strand[i]
-            b = strand.strand_body[s]
-            if vertex.vertex_local_index[i] == 0 and b >= 0:
-                d1 = body_rotation[b] @ strand.strand_root_director[s]
-            d1 = (d1 - d1.dot(t_new) * t_new).normalized()
-            es.edge_tangent[i] = t_new
-            es.edge_reference_director[i] = d1
-            m1, m2 = material_frame(d1, t_new, theta[i])
-            es.edge_material_d1[i] = m1
-            es.edge_material_d2[i] = m2
+        reference_frame_at(i, vertex, edge, strand, body_rotation, x, theta, es)
     if ti.static(with_reference_twist):
         for i in x:
-            if pair.pair_is_active[i] != 0:
-                t_prev = es.edge_tangent[i - 1]
-                t_cur = es.edge_tangent[i]
-                d1_transported = parallel_transport(es.edge_reference_director[i - 1], t_prev, t_cur)
-                angle = signed_angle(d1_transported, es.edge_reference_director[i], t_cur)
-                old = es.edge_reference_twist[i]
-                es.edge_reference_twist[i] = old + wrap_angle(angle - old)
+            reference_twist_at(i, pair, es)
 
 
 @ti.kernel
@@ -73,9 +109,4 @@ def update_material_frames(edge: ti.template(), theta: ti.template(), es: ti.tem
     """theta <- theta + dtheta on free edges, then the material directors (tangents and
     reference frames are unchanged by a twist update)."""
     for i in theta:
-        if edge.edge_is_fixed[i] == 0:
-            theta[i] += dtheta[i]
-        if edge.edge_rest_length[i] > 0.0:
-            m1, m2 = material_frame(es.edge_reference_director[i], es.edge_tangent[i], theta[i])
-            es.edge_material_d1[i] = m1
-            es.edge_material_d2[i] = m2
+        material_frame_at(i, edge, theta, es, dtheta)

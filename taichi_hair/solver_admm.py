@@ -15,6 +15,12 @@ Per step (Sec. 4.2):
    g. theta <- theta + dth, update frames
 5. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
 
+Step 4 has two schedules (``SolverADMMConfig.schedule``): "stage" launches
+the kernels above once per iteration, each parallel over all vertices (GPU);
+"strand" runs the whole loop in one kernel, parallel over strands, all
+iterations of a strand serially (CPU; ``schedule_strand``).  Both call the
+same per-element functions and give bit-identical results on CPU.
+
 The step allocates nothing: all buffers are created in ``__init__``.
 """
 
@@ -32,11 +38,16 @@ from .errors import SimulationDivergedError
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames
 from .model import Model, _np_float
+from .schedule_strand import admm_iterations_strand
 from .state import Control, State
 from .strains import BERGOU, KORNER
 from .tridiag import TridiagonalSolver
 
-STAGES = ("begin", "local", "global", "frames", "twist", "end")
+#: Profiled stages.  The stage schedule fills local/global/frames/twist; the strand
+#: schedule records its fused ADMM loop under "iterations" (and the frame update
+#: before the loop under "frames").
+STAGES = ("begin", "local", "global", "frames", "twist", "iterations", "end")
+_GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
 
@@ -71,9 +82,21 @@ class SolverADMM:
         self._diag_strain = ti.field(float, model.vertex_count)
         self._set_coefficients()
         arch = ti.lang.impl.current_cfg().arch
+        gpu = arch in _GPU_ARCHS
+        schedule = cfg.schedule
+        if schedule == "auto":
+            schedule = "stage" if gpu or cfg.tridiagonal == "pcr" else "strand"
+        elif schedule == "strand" and cfg.tridiagonal == "pcr":
+            raise ValueError(
+                "SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule='strand' "
+                "(the strand schedule solves each strand with Thomas)")
+        #: Resolved schedule: "stage" or "strand".
+        self.schedule = schedule
         method = cfg.tridiagonal
-        if method == "auto":
-            method = "pcr" if arch in (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu) else "thomas"
+        if schedule == "strand":
+            method = "thomas"
+        elif method == "auto":
+            method = "pcr" if gpu else "thomas"
         self.tridiagonal_method = method
         self.tridiag = TridiagonalSolver(model.strand_vertex_start, model.strand_vertex_count, model.vertex_strand,
                                          h["strand_vertex_count"], method)
@@ -150,6 +173,27 @@ class SolverADMM:
         update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist, state)
         t0 = self._tock("frames", t0)
 
+        if self.schedule == "strand":
+            # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
+            admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, m, control.body_rotation,
+                                   state.vertex_position, state.edge_twist, state, b, g, v_air, cfg.air_viscosity,
+                                   dt, damping_scale, cfg.iterations)
+            t0 = self._tock("iterations", t0)
+            self.iteration_count += cfg.iterations
+        else:
+            t0 = self._iterations_stage(state, control, dt, g, v_air, damping_scale, t0)
+
+        admm.end_step(dyn, state, state, b, dt)
+        self.step_count += 1
+        if cfg.check_finite:
+            self.check_finite(state)
+        self._tock("end", t0)
+
+    def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
+                          t0: float) -> float:
+        """Step 4 of Algorithm 1, "stage" schedule: a few kernels per iteration, each over all vertices."""
+        m, b, cfg = self.model, self.buf, self.config
+        dyn = self.dynamic
         for _ in range(cfg.iterations):
             # (a) Local elasticity solve over y (Sec. 4.4).
             solve_local_elasticity(self.measure, self.use_q, m, m, m, m, control.body_rotation,
@@ -173,12 +217,7 @@ class SolverADMM:
             update_material_frames(m, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
             t0 = self._tock("frames", t0)
             self.iteration_count += 1
-
-        admm.end_step(dyn, state, state, b, dt)
-        self.step_count += 1
-        if cfg.check_finite:
-            self.check_finite(state)
-        self._tock("end", t0)
+        return t0
 
     def check_finite(self, state: State) -> None:
         """Raise SimulationDivergedError (after restoring the begin-of-step state) on NaN/inf."""

@@ -3,7 +3,8 @@
 One interface, :class:`TridiagonalSolver`, three implementations:
 
 * ``thomas``: the Thomas algorithm, one strand per thread, sequential along the
-  strand.  Linear work; the fastest choice on CPU.
+  strand.  Linear work; the fastest choice on CPU.  Its per-strand body,
+  :func:`thomas_strand`, is also called by the fused strand schedule.
 * ``pcr`` (global memory): Parallel Cyclic Reduction with one thread per
   vertex and ceil(log2 m_max) reduction levels, ping-ponging between two
   buffers.  Runs on every arch; it is how PCR is tested on CPU.
@@ -26,6 +27,28 @@ import taichi as ti
 BLOCK_MAX = 1024
 
 
+@ti.func
+def thomas_strand(start: ti.i32, m: ti.i32, lower: ti.template(), diag: ti.template(),
+                  upper: ti.template(), rhs: ti.template()):
+    """Thomas algorithm on rows start .. start+m-1, serially (one strand, one thread).
+
+    Forward sweep: upper <- c', rhs <- d'; then back substitution into rhs.
+    Shared by :func:`thomas_solve` and the fused strand schedule
+    (:mod:`taichi_hair.schedule_strand`), so both do the same arithmetic.
+    """
+    inv = 1.0 / diag[start]
+    upper[start] = upper[start] * inv
+    rhs[start] = rhs[start] * inv
+    for k in range(1, m):
+        i = start + k
+        inv_k = 1.0 / (diag[i] - lower[i] * upper[i - 1])
+        upper[i] = upper[i] * inv_k
+        rhs[i] = (rhs[i] - lower[i] * rhs[i - 1]) * inv_k
+    for kk in range(1, m):
+        i = start + m - 1 - kk
+        rhs[i] = rhs[i] - upper[i] * rhs[i + 1]
+
+
 @ti.kernel
 def thomas_solve(
     strand_vertex_start: ti.template(),
@@ -36,21 +59,7 @@ def thomas_solve(
     rhs: ti.template(),
 ):
     for s in strand_vertex_start:
-        start = strand_vertex_start[s]
-        m = strand_vertex_count[s]
-        # Forward sweep: upper <- c', rhs <- d'.
-        inv = 1.0 / diag[start]
-        upper[start] = upper[start] * inv
-        rhs[start] = rhs[start] * inv
-        for k in range(1, m):
-            i = start + k
-            inv_k = 1.0 / (diag[i] - lower[i] * upper[i - 1])
-            upper[i] = upper[i] * inv_k
-            rhs[i] = (rhs[i] - lower[i] * rhs[i - 1]) * inv_k
-        # Back substitution.
-        for kk in range(1, m):
-            i = start + m - 1 - kk
-            rhs[i] = rhs[i] - upper[i] * rhs[i + 1]
+        thomas_strand(strand_vertex_start[s], strand_vertex_count[s], lower, diag, upper, rhs)
 
 
 @ti.kernel
@@ -105,6 +114,7 @@ def pcr_solve_global(
 
 @ti.kernel
 def pcr_solve_shared(
+    dtype: ti.template(),
     block_size: ti.template(),
     n_levels: ti.template(),
     ncomp: ti.template(),
@@ -118,7 +128,7 @@ def pcr_solve_shared(
     upper: ti.template(),
     rhs: ti.template(),
 ):
-    """Strand-block PCR in shared memory (CUDA only).
+    """Strand-block PCR in shared memory (CUDA and Vulkan).
 
     Thread ``lid`` of block ``blk`` owns vertex block_vertex_start[blk] + lid.
     Each level reads its neighbours at +-stride inside the same strand from
@@ -129,10 +139,10 @@ def pcr_solve_shared(
     for t in range(n_blocks * block_size):
         blk = t // block_size
         lid = t % block_size
-        sa = ti.simt.block.SharedArray((block_size,), float)
-        sb = ti.simt.block.SharedArray((block_size,), float)
-        sc = ti.simt.block.SharedArray((block_size,), float)
-        sd = ti.simt.block.SharedArray((block_size, ncomp), float)
+        sa = ti.simt.block.SharedArray((block_size,), dtype)
+        sb = ti.simt.block.SharedArray((block_size,), dtype)
+        sc = ti.simt.block.SharedArray((block_size,), dtype)
+        sd = ti.simt.block.SharedArray((block_size, ncomp), dtype)
         count = block_vertex_count[blk]
         active = lid < count
         i = block_vertex_start[blk] + lid
@@ -209,7 +219,7 @@ class TridiagonalSolver:
         vertex_strand: Taichi i32 field (vertex_count,).
         counts: the strand vertex counts as a NumPy array (to plan blocks and levels).
         method: ``"thomas"`` or ``"pcr"``.
-        use_shared: use the strand-block shared-memory PCR (CUDA only).
+        use_shared: use the strand-block shared-memory PCR (default on CUDA and Vulkan).
     """
 
     def __init__(self, strand_vertex_start, strand_vertex_count, vertex_strand, counts, method="thomas",
@@ -225,7 +235,7 @@ class TridiagonalSolver:
         self.max_count = int(counts.max())
         self.n_levels = _levels(self.max_count)
         if use_shared is None:
-            use_shared = ti.lang.impl.current_cfg().arch == ti.cuda
+            use_shared = ti.lang.impl.current_cfg().arch in (ti.cuda, ti.vulkan)
         self.use_shared = bool(use_shared and method == "pcr" and self.max_count <= BLOCK_MAX)
         self._buffers = {}
         if method == "pcr" and not self.use_shared:
@@ -249,7 +259,7 @@ class TridiagonalSolver:
             thomas_solve(self.strand_vertex_start, self.strand_vertex_count, lower, diag, upper, rhs)
         elif self.use_shared:
             ncomp = rhs.n if hasattr(rhs, "n") else 1
-            pcr_solve_shared(self.block_size, self.n_levels, ncomp, self.block_vertex_start, self.block_vertex_count,
+            pcr_solve_shared(ti.lang.impl.get_runtime().default_fp, self.block_size, self.n_levels, ncomp, self.block_vertex_start, self.block_vertex_count,
                              self.vertex_strand, self.strand_vertex_start, self.strand_vertex_count,
                              lower, diag, upper, rhs)
         else:

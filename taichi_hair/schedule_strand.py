@@ -1,0 +1,121 @@
+"""The "strand" schedule: every ADMM iteration of a step in one kernel, one strand per thread.
+
+The "stage" schedule (``SolverADMM.step`` with ``schedule="stage"``) launches
+about nine kernels per ADMM iteration, each a parallel loop over *all*
+vertices: local step, position assembly, tridiagonal solve, position update,
+reference frames, pair twist terms, twist assembly, tridiagonal solve,
+material frames.  That is the right shape for a GPU, where every vertex gets
+its own thread.  On a CPU with a few cores it is not: every stage streams the
+whole groom through memory, and the launch overhead dominates small scenes.
+
+Strands are independent inside an ADMM iteration (contacts aside), so
+:func:`admm_iterations_strand` runs one parallel loop over strands (the only
+parallel loop of the kernel: Taichi parallelises the outermost loop), and,
+for its strand, *all* iterations serially:
+
+    for it in range(iterations):
+        local step            (local_elasticity_at,     every pair)
+        position assembly     (assemble_position_at,    every vertex)
+        Thomas solve          (thomas_strand,           3 right-hand sides)
+        x += dx               (apply_position_update_at)
+        reference frames      (reference_frame_at,      every edge)
+        reference twists      (reference_twist_at,      every pair; Bergou only)
+        pair twist terms      (pair_twist_terms_at,     every pair)
+        twist assembly        (assemble_twist_at,       every edge)
+        Thomas solve          (thomas_strand,           1 right-hand side)
+        theta += dtheta       (material_frame_at,       every edge)
+
+A strand's working set (a few kB for tens of vertices) stays in L1/L2 cache
+across stages and iterations, and there is one launch per step instead of
+~9 per iteration.
+
+Each stage is a full serial loop over the strand before the next starts,
+because of the same dependencies as between the staged kernels: the
+assembly of vertex i reads the pair forces of i-1, i, i+1; the reference
+twist of pair i needs the tangents and reference directors of edges i-1 and
+i; the twist assembly of edge j reads the twist terms of pairs j and j+1; the
+solves need the whole strand assembled.  The ``*_at`` functions are the
+bodies of the stage kernels, so each element sees the same arithmetic in
+the same order, and on CPU the two schedules give bit-identical states
+(``tests/test_schedules.py``).  The tridiagonal solves are always Thomas.
+"""
+
+import taichi as ti
+
+from .admm import (
+    apply_position_update_at,
+    assemble_position_at,
+    assemble_twist_at,
+    pair_twist_terms_at,
+)
+from .elasticity import local_elasticity_at
+from .frames import material_frame_at, reference_frame_at, reference_twist_at
+from .tridiag import thomas_strand
+
+vec3 = ti.math.vec3
+
+
+@ti.kernel
+def admm_iterations_strand(
+    measure: ti.template(),
+    use_q: ti.template(),
+    with_reference_twist: ti.template(),
+    dynamic: ti.template(),
+    model: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+    buf: ti.template(),
+    gravity: vec3,
+    air_velocity: vec3,
+    air_viscosity: float,
+    dt: float,
+    damping_scale: float,
+    iterations: ti.i32,
+):
+    """``iterations`` ADMM iterations (Algorithm 1, lines 4a-4g) for every strand, strands in parallel.
+
+    Arguments as for the stage kernels: ``model`` serves as the vertex, edge,
+    pair and strand groups; ``x``, ``theta``, ``es`` are the state;
+    ``buf`` the solver buffers.  The frames must be up to date on entry
+    (``update_reference_frames`` after ``begin_step``), as in the stage schedule.
+    """
+    for s in model.strand_vertex_start:
+        start = model.strand_vertex_start[s]
+        m = model.strand_vertex_count[s]
+        for _it in range(iterations):
+            # (a, c) Local elasticity solve and fused dual update, every pair of the strand.
+            for k in range(m):
+                i = start + k
+                local_elasticity_at(i, measure, use_q, model, model, model, model, body_rotation, x, theta,
+                                    es, buf, damping_scale)
+            # (d) Global step: assemble (reads pair forces i-1, i, i+1), solve, update.
+            for k in range(m):
+                i = start + k
+                assemble_position_at(i, dynamic, model, model, model, x, buf, gravity, air_velocity,
+                                     air_viscosity, dt)
+            thomas_strand(start, m, buf.tri_lower, buf.tri_diag, buf.tri_upper, buf.tri_rhs3)
+            for k in range(m):
+                i = start + k
+                apply_position_update_at(i, model, x, buf)
+            # (e) Frames: every edge's tangent first, then the reference twists.
+            for k in range(m):
+                i = start + k
+                reference_frame_at(i, model, model, model, body_rotation, x, theta, es)
+            if ti.static(with_reference_twist):
+                for k in range(m):
+                    i = start + k
+                    reference_twist_at(i, model, es)
+            # (f) Twist Newton step.
+            for k in range(m):
+                i = start + k
+                pair_twist_terms_at(i, measure, model, model, model, theta, es, buf, damping_scale)
+            for k in range(m):
+                i = start + k
+                assemble_twist_at(i, dynamic, model, model, theta, buf, dt)
+            thomas_strand(start, m, buf.tri_lower, buf.tri_diag, buf.tri_upper, buf.tri_rhs1)
+            # (g) theta += dtheta, material frames.
+            for k in range(m):
+                i = start + k
+                material_frame_at(i, model, theta, es, buf.tri_rhs1)
