@@ -1,0 +1,509 @@
+"""Kernels of :class:`taichi_hair.solver_shape.SolverShape` (Han & Harada 2012, "Real-time Hair
+Simulation with Efficient Hair Style Preservation").
+
+One stage per kernel, in the order of the paper's Algorithm 1; the math lives in
+``ti.func``s that a test can call alone (wrap one in a tiny kernel):
+
+* rotations are unit quaternions stored as ``vec4`` (x, y, z, w), as in TressFX:
+  :func:`quat_mul`, :func:`quat_rotate`, :func:`quat_rotate_inverse`,
+  :func:`quat_between` (shortest arc), :func:`quat_from_matrix`;
+* :func:`global_stiffness_at` -- the root-to-tip ramp of S_G (Sec. 3.3);
+* :func:`local_shape_correction` -- the two-vertex update of Eq. 4;
+* :func:`edge_length_correction` -- the PBD distance constraint [MHHR07];
+* :func:`project_out_of_sphere`, :func:`project_out_of_capsule` -- Sec. 3.5.
+
+Kernel arguments follow the package convention: ``model`` (static groom data),
+``solver`` (the :class:`SolverShape`, holding its own fields), control inputs,
+the state fields, scalars.  A strand's region ``r = solver.strand_region[s]``
+selects its row in the ``solver.region_*`` fields.
+
+Notation (Sec. 3.1): frame i has its origin at P_i and rotation ``R_i`` whose x
+axis is ``normalize(P_i - P_{i-1})`` (``P_1 - P_0`` for i = 0); the local rest
+position of vertex i is ``^{i-1}P_i^0 = R_{i-1}^{0 T} (P_i^0 - P_{i-1}^0)``.
+"""
+
+
+import taichi as ti
+
+vec3 = ti.math.vec3
+vec4 = ti.math.vec4
+
+#: Collider kinds stored in ``solver.collider_kind``.
+COLLIDER_SPHERE = 0
+COLLIDER_CAPSULE = 1
+
+
+# =========================================================================== quaternion math
+@ti.func
+def quat_identity() -> vec4:
+    return vec4(0.0, 0.0, 0.0, 1.0)
+
+
+@ti.func
+def quat_mul(a: vec4, b: vec4) -> vec4:
+    """Hamilton product a * b (apply b first, then a)."""
+    av = vec3(a[0], a[1], a[2])
+    bv = vec3(b[0], b[1], b[2])
+    v = a[3] * bv + b[3] * av + av.cross(bv)
+    return vec4(v[0], v[1], v[2], a[3] * b[3] - av.dot(bv))
+
+
+@ti.func
+def quat_conjugate(q: vec4) -> vec4:
+    return vec4(-q[0], -q[1], -q[2], q[3])
+
+
+@ti.func
+def quat_rotate(q: vec4, v: vec3) -> vec3:
+    """R(q) v for a unit quaternion q."""
+    u = vec3(q[0], q[1], q[2])
+    t = 2.0 * u.cross(v)
+    return v + q[3] * t + u.cross(t)
+
+
+@ti.func
+def quat_rotate_inverse(q: vec4, v: vec3) -> vec3:
+    """R(q)^T v for a unit quaternion q."""
+    return quat_rotate(quat_conjugate(q), v)
+
+
+@ti.func
+def quat_between(a: vec3, b: vec3) -> vec4:
+    """Shortest-arc rotation taking unit vector a to unit vector b.
+
+    For b = -a (the arc is not unique) it turns by pi about an axis perpendicular to a.
+    """
+    d = a.dot(b)
+    q = quat_identity()
+    if d < -1.0 + 1e-6:
+        axis = a.cross(vec3(1.0, 0.0, 0.0))
+        if axis.norm_sqr() < 1e-6:
+            axis = a.cross(vec3(0.0, 1.0, 0.0))
+        axis = axis.normalized()
+        q = vec4(axis[0], axis[1], axis[2], 0.0)
+    else:
+        c = a.cross(b)
+        q = vec4(c[0], c[1], c[2], 1.0 + d).normalized()
+    return q
+
+
+@ti.func
+def quat_from_matrix(R) -> vec4:
+    """Unit quaternion of a 3x3 rotation matrix (Shepperd's method: divide by the largest term)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    q = quat_identity()
+    if tr > 0.0:
+        s = ti.sqrt(tr + 1.0) * 2.0  # 4 w
+        q = vec4((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s)
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = ti.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2.0  # 4 x
+        q = vec4(0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s)
+    elif R[1, 1] > R[2, 2]:
+        s = ti.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2.0  # 4 y
+        q = vec4((R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s)
+    else:
+        s = ti.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2.0  # 4 z
+        q = vec4((R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s)
+    return q.normalized()
+
+
+@ti.func
+def advance_frame(q_prev: vec4, x_prev: vec3, x_next: vec3) -> vec4:
+    """Global rotation of frame i from frame i-1 (Eq. 1, Algorithm 2 l.7-9, Algorithm 3 l.10-12).
+
+    ``^{i-1}x_i = R_{i-1}^T normalize(P_i - P_{i-1})``; the local transform ``^{i-1}R_i`` is the
+    rotation from (1, 0, 0) to ``^{i-1}x_i``, and ``^wR_i = ^wR_{i-1} ^{i-1}R_i``.
+    """
+    local_x = quat_rotate_inverse(q_prev, (x_next - x_prev).normalized())
+    return quat_mul(q_prev, quat_between(vec3(1.0, 0.0, 0.0), local_x)).normalized()
+
+
+# =========================================================================== constraint math
+@ti.func
+def global_stiffness_at(stiffness: float, effective_range: float, falloff: float, u: float) -> float:
+    """S_G at rest arc-length fraction u in [0, 1] from the root (Sec. 3.3).
+
+    Full ``stiffness`` up to ``effective_range * (1 - falloff)``, then a linear ramp to zero at
+    ``effective_range``; zero beyond.  ``falloff = 0`` is TressFX's step cut-off, ``falloff = 1``
+    a linear decrease over the whole range.
+    """
+    ramp = 1.0
+    width = falloff * effective_range
+    if width > 0.0:
+        ramp = ti.math.clamp((effective_range - u) / width, 0.0, 1.0)
+    elif u > effective_range:
+        ramp = 0.0
+    return stiffness * ramp
+
+
+@ti.func
+def local_shape_correction(x_prev: vec3, x_i: vec3, goal_i: vec3, stiffness: float, w_prev: float, w_i: float):
+    """Eq. 4: move P_{i-1} and P_i so that the edge moves S_L of the way to its goal.
+
+    ``d = goal_i - x_i`` (``goal_i = P_{i-1} + R_{i-1} ^{i-1}P_i^0``, Eq. 4's ``^{i-1}d_i`` in world
+    axes).  With both vertices free each takes half of ``S_L d`` (P_{i-1} backwards, P_i forwards;
+    the paper's "=" for P_{i-1} is read as "-=").  A kinematic P_{i-1} (w = 0) gives P_i the whole
+    correction, as PBD's inverse-mass weighting does.  Returns (new P_{i-1}, new P_i).
+    """
+    d = stiffness * (goal_i - x_i)
+    w = w_prev + w_i
+    a = 0.0
+    b = 0.0
+    if w > 0.0:
+        a = w_prev / w
+        b = w_i / w
+    return x_prev - a * d, x_i + b * d
+
+
+@ti.func
+def edge_length_correction(x_a: vec3, x_b: vec3, rest_length: float, w_a: float, w_b: float):
+    """Position-based distance constraint |x_b - x_a| = rest_length [MHHR07].  Returns new (x_a, x_b)."""
+    e = x_b - x_a
+    length = e.norm()
+    w = w_a + w_b
+    new_a = x_a
+    new_b = x_b
+    if w > 0.0 and length > 1e-12:
+        c = (length - rest_length) / (length * w)
+        new_a = x_a + (w_a * c) * e
+        new_b = x_b - (w_b * c) * e
+    return new_a, new_b
+
+
+@ti.func
+def project_out_of_sphere(p: vec3, center: vec3, radius: float) -> vec3:
+    """Closest point on the sphere's surface if p is inside, else p (Sec. 3.5).
+
+    A point exactly at the centre is pushed along +y (any direction is a closest point).
+    """
+    d = p - center
+    dist = d.norm()
+    out = p
+    if dist < radius:
+        n = vec3(0.0, 1.0, 0.0)
+        if dist > 1e-12:
+            n = d / dist
+        out = center + radius * n
+    return out
+
+
+@ti.func
+def project_out_of_capsule(p: vec3, a: vec3, b: vec3, radius: float) -> vec3:
+    """Closest point on the capsule's surface (segment a-b swept by ``radius``) if p is inside, else p."""
+    ab = b - a
+    t = 0.0
+    len2 = ab.norm_sqr()
+    if len2 > 0.0:
+        t = ti.math.clamp((p - a).dot(ab) / len2, 0.0, 1.0)
+    return project_out_of_sphere(p, a + t * ab, radius)
+
+
+@ti.func
+def inverse_mass(model: ti.template(), i: ti.i32) -> float:
+    """1 for a simulated vertex, 0 for a kinematic one (Sec. 3.2: only the fixed/free flag is used)."""
+    return 1.0 - ti.cast(model.vertex_is_fixed[i], float)
+
+
+@ti.func
+def root_rotation(model: ti.template(), solver: ti.template(), x: ti.template(), s: ti.i32, k: ti.i32) -> vec4:
+    """Global rotation ^wR_k of frame k in {0, 1} of strand s ("update wT_0 and wT_1", Alg. 3 l.6).
+
+    Clamped strand: the head rotation times the rest rotation, ``^wR_H ^wR_k^0``.  Free strand (no
+    head): the rest frame turned by the shortest arc from the rest root tangent to the current one.
+    """
+    a = model.strand_vertex_start[s]
+    q = quat_identity()
+    if model.strand_body[s] >= 0:
+        q = quat_mul(solver.strand_head_rotation[s], solver.vertex_rest_rotation[a + k])
+    else:
+        q0 = solver.vertex_rest_rotation[a]
+        rest_x = quat_rotate(q0, vec3(1.0, 0.0, 0.0))
+        cur_x = (x[a + 1] - x[a]).normalized()
+        q = quat_mul(quat_between(rest_x, cur_x), q0).normalized()
+    return q
+
+
+# =========================================================================== set-up (Algorithm 2)
+@ti.kernel
+def initialize_rest_transforms(model: ti.template(), solver: ti.template()):
+    """Algorithm 2: rest global rotations ^wR_i^0 and local rest positions ^{i-1}P_i^0, serial per strand.
+
+    Frame 0: x_0 along P_1 - P_0, y_0 the model's root director (``strand_root_director``,
+    re-orthogonalised; the paper's "arbitrary vector"), z_0 = x_0 x y_0.
+    """
+    for s in model.strand_vertex_start:
+        a = model.strand_vertex_start[s]
+        m = model.strand_vertex_count[s]
+        p0 = model.vertex_rest_position[a]
+        x0 = (model.vertex_rest_position[a + 1] - p0).normalized()
+        y0 = model.strand_root_director[s]
+        y0 = y0 - y0.dot(x0) * x0
+        if y0.norm_sqr() < 1e-12:
+            y0 = x0.cross(vec3(0.0, 0.0, 1.0))
+            if y0.norm_sqr() < 1e-12:
+                y0 = x0.cross(vec3(1.0, 0.0, 0.0))
+        y0 = y0.normalized()
+        z0 = x0.cross(y0)
+        q = quat_from_matrix(ti.Matrix.cols([x0, y0, z0]))
+        solver.vertex_rest_rotation[a] = q
+        solver.vertex_rest_local_position[a] = vec3(0.0)
+        for k in range(1, m):
+            i = a + k
+            prev = model.vertex_rest_position[i - 1]
+            cur = model.vertex_rest_position[i]
+            solver.vertex_rest_local_position[i] = quat_rotate_inverse(q, cur - prev)
+            q = advance_frame(q, prev, cur)
+            solver.vertex_rest_rotation[i] = q
+
+
+# =========================================================================== per-step stages
+@ti.kernel
+def compute_head_rotations(model: ti.template(), body_rotation: ti.template(), solver: ti.template()):
+    """^wR_H of each strand as a quaternion: the rotation of its root body (identity if free)."""
+    for s in model.strand_body:
+        b = model.strand_body[s]
+        q = quat_identity()
+        if b >= 0:
+            q = quat_from_matrix(body_rotation[b])
+        solver.strand_head_rotation[s] = q
+
+
+@ti.kernel
+def begin_step(x: ti.template(), v: ti.template(), solver: ti.template()):
+    """Keep x^t (the Verlet x_prev, Sec. 3.2) and v^t (to restore a diverged step)."""
+    for i in x:
+        solver.vertex_position_begin[i] = x[i]
+        solver.vertex_velocity_begin[i] = v[i]
+
+
+@ti.kernel
+def integrate(
+    model: ti.template(),
+    solver: ti.template(),
+    body_rotation: ti.template(),
+    body_translation: ti.template(),
+    gravity: vec3,
+    air_velocity: vec3,
+    air_drag: float,
+    dt: float,
+    x: ti.template(),
+):
+    """Sec. 3.2: Verlet with damping, x <- x + (1 - c) v dt + a dt^2, for free vertices; kinematic
+    vertices go to their body's transform at the end of the step, W_T_H x_body.
+
+    ``v = (x^t - x^{t-1}) / dt`` is the state velocity, so ``v dt`` is Verlet's x - x_prev; c is the
+    region's damping coefficient.  a = gravity + wind, the wind term being
+    ``air_drag (v_air - v)_perp``: the relative air velocity's component normal to the strand
+    (tangent = central difference of the begin-of-step positions), where a thin fibre's drag acts.
+    """
+    for i in x:
+        if model.vertex_is_fixed[i] != 0:
+            b = model.strand_body[model.vertex_strand[i]]
+            x[i] = body_rotation[b] @ model.vertex_body_position[i] + body_translation[b]
+        else:
+            s = model.vertex_strand[i]
+            r = solver.strand_region[s]
+            a = model.strand_vertex_start[s]
+            last = a + model.strand_vertex_count[s] - 1
+            lo = ti.max(i - 1, a)
+            hi = ti.min(i + 1, last)
+            t = (solver.vertex_position_begin[hi] - solver.vertex_position_begin[lo]).normalized()
+            v = solver.vertex_velocity_begin[i]
+            rel = air_velocity - v
+            accel = gravity + air_drag * (rel - rel.dot(t) * t)
+            c = solver.region_damping[r]
+            x[i] = solver.vertex_position_begin[i] + (1.0 - c) * dt * v + (dt * dt) * accel
+
+
+@ti.kernel
+def apply_global_shape_constraints(
+    model: ti.template(),
+    solver: ti.template(),
+    body_rotation: ti.template(),
+    body_translation: ti.template(),
+    x: ti.template(),
+):
+    """Eq. 2: P_i += S_G (W_T_H P_i^0 - P_i), S_G ramped from the root (Sec. 3.3).
+
+    Free strands have no head transform and get no global constraint.
+    """
+    for i in x:
+        s = model.vertex_strand[i]
+        b = model.strand_body[s]
+        if model.vertex_is_fixed[i] == 0 and b >= 0:
+            r = solver.strand_region[s]
+            sg = global_stiffness_at(solver.region_global_stiffness[r], solver.region_global_range[r],
+                                     solver.region_global_falloff[r], solver.vertex_arc_fraction[i])
+            if sg > 0.0:
+                goal = body_rotation[b] @ model.vertex_rest_position[i] + body_translation[b]
+                x[i] += sg * (goal - x[i])
+
+
+@ti.kernel
+def apply_local_shape_constraints_serial(model: ti.template(), solver: ti.template(), x: ti.template()):
+    """Method 1 (Algorithm 3): per strand, sweep root to tip; each vertex's frame is advanced right after
+    its constraint, so every transform is exact.  All of the region's iterations run in this launch."""
+    for s in model.strand_vertex_start:
+        a = model.strand_vertex_start[s]
+        m = model.strand_vertex_count[s]
+        r = solver.strand_region[s]
+        sl = solver.region_local_stiffness[r]
+        for _ in range(solver.region_local_iterations[r]):
+            q = root_rotation(model, solver, x, s, 1)  # ^wR_1 (= ^wR_0 up to rounding)
+            for k in range(2, m):
+                i = a + k
+                goal = x[i - 1] + quat_rotate(q, solver.vertex_rest_local_position[i])
+                p_prev, p_i = local_shape_correction(x[i - 1], x[i], goal, sl, inverse_mass(model, i - 1),
+                                                     inverse_mass(model, i))
+                x[i - 1] = p_prev
+                x[i] = p_i
+                q = advance_frame(q, p_prev, p_i)
+
+
+@ti.kernel
+def initialize_global_transforms(model: ti.template(), solver: ti.template(), x: ti.template()):
+    """Method 2 start of step: ^wR_i <- ^wR_H ^wR_i^0 (the rest transforms carried by the head; root
+    frames as in :func:`root_rotation`).  The step so depends on the State only."""
+    for i in x:
+        s = model.vertex_strand[i]
+        k = model.vertex_local_index[i]
+        if k <= 1:
+            solver.vertex_rotation[i] = root_rotation(model, solver, x, s, k)
+        else:
+            solver.vertex_rotation[i] = quat_mul(solver.strand_head_rotation[s], solver.vertex_rest_rotation[i])
+
+
+@ti.kernel
+def copy_global_transforms(solver: ti.template()):
+    """Algorithm 4 l.3-5: ^wT_temp_i <- ^wT_i."""
+    for i in solver.vertex_rotation:
+        solver.vertex_rotation_temp[i] = solver.vertex_rotation[i]
+
+
+@ti.kernel
+def apply_local_shape_constraints_batch(
+    use_rest: ti.template(),
+    model: ti.template(),
+    solver: ti.template(),
+    parity: ti.i32,
+    iteration: ti.i32,
+    x: ti.template(),
+):
+    """Eq. 4 for the vertices i >= 2 whose local index has the given parity, all strands in parallel.
+
+    Method 2 (Alg. 4 l.12-13) reads frame i-1 from ``vertex_rotation_temp``; Method 3 (Alg. 5,
+    ``use_rest``) from the rest transform carried by the head, ^wR_H ^wR_{i-1}^0.  Either way the
+    frame's origin is the current P_{i-1}.  Vertex i writes P_{i-1} and P_i, so the even batch then
+    the odd batch never write the same vertex twice (Sec. 5's batching).  A strand whose region has
+    fewer iterations than ``iteration + 1`` is skipped.
+    """
+    for i in x:
+        k = model.vertex_local_index[i]
+        if k >= 2 and k % 2 == parity:
+            s = model.vertex_strand[i]
+            r = solver.strand_region[s]
+            if iteration < solver.region_local_iterations[r]:
+                q = quat_identity()
+                if ti.static(use_rest):
+                    q = quat_mul(solver.strand_head_rotation[s], solver.vertex_rest_rotation[i - 1])
+                else:
+                    q = solver.vertex_rotation_temp[i - 1]
+                goal = x[i - 1] + quat_rotate(q, solver.vertex_rest_local_position[i])
+                p_prev, p_i = local_shape_correction(x[i - 1], x[i], goal, solver.region_local_stiffness[r],
+                                                     inverse_mass(model, i - 1), inverse_mass(model, i))
+                x[i - 1] = p_prev
+                x[i] = p_i
+
+
+@ti.kernel
+def update_global_transforms_jacobi(model: ti.template(), solver: ti.template(), iteration: ti.i32,
+                                    x: ti.template()):
+    """Algorithm 4 l.9-16: ^wR_i <- ^wR_temp_{i-1} ^{i-1}R_i, every vertex in parallel (Jacobi)."""
+    for i in x:
+        s = model.vertex_strand[i]
+        k = model.vertex_local_index[i]
+        if k <= 1:
+            solver.vertex_rotation[i] = root_rotation(model, solver, x, s, k)
+        elif iteration < solver.region_local_iterations[solver.strand_region[s]]:
+            solver.vertex_rotation[i] = advance_frame(solver.vertex_rotation_temp[i - 1], x[i - 1], x[i])
+
+
+@ti.kernel
+def solve_edge_lengths_batch(model: ti.template(), solver: ti.template(), parity: ti.i32, iteration: ti.i32,
+                             x: ti.template()):
+    """Algorithm 1 l.9: distance constraints on edges (k, k+1) with k of the given parity (disjoint writes)."""
+    for i in x:
+        k = model.vertex_local_index[i]
+        s = model.vertex_strand[i]
+        if k < model.strand_vertex_count[s] - 1 and k % 2 == parity:
+            if iteration < solver.region_length_iterations[solver.strand_region[s]]:
+                xa, xb = edge_length_correction(x[i], x[i + 1], model.edge_rest_length[i], inverse_mass(model, i),
+                                                inverse_mass(model, i + 1))
+                x[i] = xa
+                x[i + 1] = xb
+
+
+@ti.kernel
+def project_collisions(
+    model: ti.template(),
+    solver: ti.template(),
+    body_rotation: ti.template(),
+    body_translation: ti.template(),
+    collider_count: ti.i32,
+    x: ti.template(),
+):
+    """Sec. 3.5: move a free vertex inside a sphere or capsule to the closest surface point.
+
+    Collider points are stored in their body's frame (world if body = -1) and follow the body's
+    transform at the end of the step.  Colliders are visited in order, once each.
+    """
+    for i in x:
+        if model.vertex_is_fixed[i] == 0:
+            p = x[i]
+            for c in range(collider_count):
+                a = solver.collider_point_a[c]
+                b = solver.collider_point_b[c]
+                body = solver.collider_body[c]
+                if body >= 0:
+                    a = body_rotation[body] @ a + body_translation[body]
+                    b = body_rotation[body] @ b + body_translation[body]
+                if solver.collider_kind[c] == COLLIDER_SPHERE:
+                    p = project_out_of_sphere(p, a, solver.collider_radius[c])
+                else:
+                    p = project_out_of_capsule(p, a, b, solver.collider_radius[c])
+            x[i] = p
+
+
+@ti.kernel
+def end_step(solver: ti.template(), dt: float, x: ti.template(), v: ti.template()):
+    """v = (x - x^t) / dt: the Verlet velocity of the next step, kept in the State for other code."""
+    for i in x:
+        v[i] = (x[i] - solver.vertex_position_begin[i]) / dt
+
+
+@ti.kernel
+def restore_begin(solver: ti.template(), x: ti.template(), v: ti.template()):
+    """Undo a diverged step."""
+    for i in x:
+        x[i] = solver.vertex_position_begin[i]
+        v[i] = solver.vertex_velocity_begin[i]
+
+
+@ti.kernel
+def find_non_finite(model: ti.template(), x: ti.template(), v: ti.template(), out: ti.template()):
+    """out[None] <- min over bad vertices of (strand * 2 + field code), -1 if all finite.
+
+    Field codes: 0 vertex_position, 1 vertex_velocity.
+    """
+    out[None] = 2147483647
+    for i in x:
+        code = -1
+        # NaN fails every comparison, so "not (|.| <= big)" flags NaN, inf and runaway values.
+        if not (ti.abs(x[i]).sum() <= 1e30):
+            code = 0
+        elif not (ti.abs(v[i]).sum() <= 1e30):
+            code = 1
+        if code >= 0:
+            ti.atomic_min(out[None], model.vertex_strand[i] * 2 + code)
+    if out[None] == 2147483647:
+        out[None] = -1
