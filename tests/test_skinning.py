@@ -1,0 +1,276 @@
+"""Guides and linear blend skinning (taichi_hair.skinning, Daviet 2023 Sec. 5.3)."""
+
+import math
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
+from taichi_hair.scenes import _fibonacci_lower_cap, strand_along
+from taichi_hair.skinning import (
+    SkinningConfig,
+    SkinningLBS,
+    build_guides,
+    compute_binding,
+    error_colors,
+    interpolation_error,
+    select_guides,
+)
+
+SPHERE = 0.09
+LENGTH = 0.1
+
+
+def smooth_groom(count=100, seed=1):
+    """Straight strands along the normals of the lower cap of a sphere, with varied
+    vertex counts (8 to 12) and lengths (85 % to 100 % of LENGTH)."""
+    rng = np.random.default_rng(seed)
+    normals = _fibonacci_lower_cap(count, -0.6)
+    strands = []
+    for nrm in normals:
+        n = int(rng.integers(8, 13))
+        strands.append(SPHERE * nrm + strand_along(nrm, LENGTH * rng.uniform(0.85, 1.0), n, 0.0, 0.03, 0.0))
+    return strands
+
+
+def rotation(axis, angle):
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def nod(t):
+    return rotation([1.0, 0.0, 0.0], 0.3 * math.sin(2 * math.pi * t / 0.5))
+
+
+@pytest.fixture(scope="module")
+def groom():
+    strands = smooth_groom()
+    guides, model = build_guides(strands, RodMaterial(), SkinningConfig(guide_ratio=0.1, seed=3))
+    return strands, guides, model
+
+
+def guide_slices(model):
+    return model.strand_slices()
+
+
+# --------------------------------------------------------------------------- guide selection
+def test_fps_spreads_roots_and_is_deterministic():
+    strands = smooth_groom(400, seed=2)
+    roots = np.array([p[0] for p in strands])
+    chosen = select_guides(roots, 0.1, seed=5)
+    assert chosen.shape == (40,) and np.unique(chosen).size == 40
+    assert np.array_equal(chosen, select_guides(roots, 0.1, seed=5))
+
+    def min_pairwise(idx):
+        d = np.linalg.norm(roots[idx][:, None] - roots[idx][None], axis=2)
+        return d[np.triu_indices(len(idx), 1)].min()
+
+    rng = np.random.default_rng(0)
+    random_best = max(min_pairwise(rng.choice(len(roots), 40, replace=False)) for _ in range(50))
+    assert min_pairwise(chosen) > 1.5 * random_best
+    # Ratio 1 picks everything; a tiny ratio still picks one strand.
+    assert np.array_equal(np.sort(select_guides(roots, 1.0)), np.arange(400))
+    assert select_guides(roots, 1e-6).shape == (1,)
+
+
+def test_build_guides_uses_the_chosen_polylines_and_materials():
+    strands = smooth_groom(30)
+    mats = [RodMaterial(radius=4e-5 + 1e-6 * i) for i in range(30)]
+    guides, model = build_guides(strands, mats, SkinningConfig(guide_ratio=0.2, seed=1))
+    assert model.strand_count == 6
+    X = model.host["vertex_rest_position"]
+    for g, (start, count) in enumerate(guide_slices(model)):
+        assert np.array_equal(X[start:start + count], strands[guides[g]])
+        assert model.materials[g].radius == mats[guides[g]].radius
+
+
+# --------------------------------------------------------------------------- binding
+def test_weights_sum_to_one_and_guides_bind_to_themselves(groom):
+    strands, guides, model = groom
+    sk = SkinningLBS(model, guides, strands)
+    h = sk.host
+    w = h["render_strand_weights"]
+    assert w.shape == (len(strands), 4)
+    assert np.all(w >= 0.0)
+    assert np.allclose(w.sum(axis=1), 1.0, rtol=0, atol=1e-12)
+    wf = sk.fields.render_vertex_bind_weight.to_numpy()
+    assert np.allclose(wf.sum(axis=1), 1.0, rtol=0, atol=1e-6)
+    for g, s in enumerate(guides):
+        assert h["render_strand_guides"][s, 0] == g and w[s, 0] == 1.0
+    # Non-guides: the nearest guide weighs most (inverse distance).
+    others = np.setdiff1d(np.arange(len(strands)), guides)
+    assert np.all(np.argmax(w[others], axis=1) == 0)
+    u = h["render_vertex_bind_param"]
+    assert np.all((u >= 0) & (u <= 1))
+
+
+def test_arc_length_binding_with_different_vertex_counts():
+    """One straight guide (5 vertices) and a parallel render strand (9 vertices, other length):
+    the guide's second half turns rigidly by 90 degrees about its middle vertex; render
+    vertices past half their arc length must turn with it, the others stay."""
+    guide = np.c_[np.linspace(0.0, 0.1, 5), np.zeros(5), np.zeros(5)]
+    render = np.c_[np.linspace(0.0, 0.13, 9), np.full(9, 0.01), np.zeros(9)]
+    b = GroomBuilder()
+    b.add_strand(guide, RodMaterial())
+    model = b.finalize()
+    sk = SkinningLBS(model, [0], [guide, render], SkinningConfig(neighbour_count=4))
+    assert sk.neighbour_count == 1
+    R = rotation([0, 0, 1], math.pi / 2)
+    pivot = guide[2]
+    moved = guide.copy()
+    moved[3:] = (R @ (guide[3:] - pivot).T).T + pivot
+    state, control = model.state(), model.control()
+    state.vertex_position.from_numpy(moved.astype(np.float32))
+    sk.deform(state, control)
+    x = sk.positions()[5:]
+    s = np.linspace(0.0, 1.0, 9)
+    expected = np.where((s >= 0.5)[:, None], (R @ (render - pivot).T).T + pivot, render)
+    np.testing.assert_allclose(x, expected, rtol=0, atol=2e-7)
+    assert np.linalg.norm(x[-1] - render[-1]) > 0.05  # the check is not trivial
+
+
+# --------------------------------------------------------------------------- deformation
+def bent_guides(model, amplitude=0.02):
+    """Guide positions bent sideways by a smooth field that keeps the two root vertices."""
+    X = model.host["vertex_rest_position"].copy()
+    local = model.host["vertex_local_index"]
+    w = np.maximum(local - 1, 0)[:, None] ** 2
+    return X + amplitude * w / 64.0 * np.array([1.0, 0.3, -0.5]) * np.sin(X[:, [2, 0, 1]] * 40.0)
+
+
+@pytest.mark.parametrize("frame", ["transport", "material"])
+def test_guides_are_reproduced_exactly(groom, frame):
+    strands, guides, model = groom
+    sk = SkinningLBS(model, guides, strands, SkinningConfig(frame=frame))
+    state, control = model.state(), model.control()
+    state.vertex_position.from_numpy(bent_guides(model).astype(np.float32))
+    sk.deform(state, control)
+    x = sk.positions()
+    xg = state.vertex_position.to_numpy()
+    starts = sk.host["render_strand_vertex_start"]
+    moved = 0.0
+    for g, (start, count) in enumerate(guide_slices(model)):
+        s = guides[g]
+        r = x[starts[s]:starts[s] + count]
+        np.testing.assert_allclose(r, xg[start:start + count], rtol=0, atol=1e-7)
+        moved = max(moved, float(np.abs(r - model.host["vertex_rest_position"][start:start + count]).max()))
+    assert moved > 1e-3
+
+
+def test_rigid_motion_is_reproduced_for_every_strand(groom):
+    strands, guides, model = groom
+    sk = SkinningLBS(model, guides, strands)
+    R = rotation([0.3, -1.0, 0.5], 1.1)
+    T = np.array([0.05, -0.2, 0.1])
+    state, control = model.state(), model.control()
+    X = model.host["vertex_rest_position"]
+    state.vertex_position.from_numpy((X @ R.T + T).astype(np.float32))
+    control.set_body_transform(0, R, T)
+    sk.deform(state, control)
+    P = sk.host["render_vertex_rest_position"]
+    expected = P @ R.T + T
+    err = np.abs(sk.positions() - expected).max()
+    assert err < 2e-6, err
+    assert np.abs(expected - P).max() > 0.1
+
+
+def test_bad_input_names_the_field(groom):
+    strands, guides, model = groom
+    for ratio in (0.0, -0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="guide_ratio"):
+            SkinningConfig(guide_ratio=ratio)
+        with pytest.raises(ValueError, match="guide_ratio"):
+            select_guides(np.zeros((3, 3)), ratio)
+    for k in (0, -2, 1.5):
+        with pytest.raises(ValueError, match="neighbour_count"):
+            SkinningConfig(neighbour_count=k)
+    with pytest.raises(ValueError, match="frame"):
+        SkinningConfig(frame="world")
+    with pytest.raises(ValueError, match="guide_indices"):
+        compute_binding(model, guides[:-1], strands)
+    with pytest.raises(ValueError, match="guide_indices"):
+        compute_binding(model, guides[::-1], strands)
+    with pytest.raises(ValueError, match="strand_body"):
+        SkinningLBS(model, guides, strands, strand_body=[0] * (len(strands) - 1))
+    with pytest.raises(ValueError, match="materials"):
+        build_guides(strands, [RodMaterial()] * 3)
+    with pytest.raises(ValueError, match="strands"):
+        build_guides([np.zeros((1, 3))])
+    with pytest.raises(ValueError, match="reference_positions"):
+        interpolation_error(np.zeros((5, 3)), np.zeros((4, 3)), [5])
+    with pytest.raises(ValueError, match="strand_vertex_count"):
+        interpolation_error(np.zeros((5, 3)), np.zeros((5, 3)), [2, 2])
+
+
+# --------------------------------------------------------------------------- interpolation error
+def test_interpolation_error_and_colours_on_a_known_case():
+    x = np.zeros((5, 3))
+    ref = np.zeros((5, 3))
+    ref[1, 0] = 3e-3
+    ref[3] = [0.0, 3e-3, 4e-3]
+    e = interpolation_error(x, ref, [2, 3])
+    np.testing.assert_allclose(e.vertex_error, [0, 3e-3, 0, 5e-3, 0])
+    np.testing.assert_allclose(e.strand_error_max, [3e-3, 5e-3])
+    np.testing.assert_allclose(e.strand_error_rms, [3e-3 / math.sqrt(2), 5e-3 / math.sqrt(3)])
+    np.testing.assert_allclose(e.vertex_strand_error("max"), [3e-3, 3e-3, 5e-3, 5e-3, 5e-3])
+    c = error_colors(e.vertex_error, vmax=5e-3)
+    assert c.shape == (5, 3) and c.dtype == np.float32
+    assert np.all((c >= 0) & (c <= 1))
+    assert np.array_equal(c[0], c[2]) and not np.array_equal(c[0], c[3])
+    assert c[3, 0] > 0.8 and c[3, 2] < 0.2  # the largest error is red
+    assert c[0, 2] > c[0, 0]  # zero is blue
+
+
+def test_skinned_guides_match_a_full_simulation():
+    """Simulate the guides alone and every strand, under gravity with a nodding head;
+    skin the render strands from the guides and measure against the full run."""
+    strands = smooth_groom(100)
+    guides, gmodel = build_guides(strands, RodMaterial(), SkinningConfig(guide_ratio=0.1, seed=3))
+    b = GroomBuilder()
+    for p in strands:
+        b.add_strand(p, RodMaterial())
+    full = b.finalize()
+    dt = 1.0 / 96.0
+    runs = []
+    for model in (gmodel, full):
+        state, control = model.state(), model.control()
+        solver = SolverADMM(model, SolverADMMConfig(iterations=10))
+        for k in range(10):
+            control.set_body_transform(0, nod((k + 1) * dt), np.zeros(3))
+            solver.step(state, control, dt)
+        runs.append((state, control))
+    (gstate, gcontrol), (fstate, fcontrol) = runs
+    reference = fstate.positions()
+    rest = full.host["vertex_rest_position"]
+    counts = full.host["strand_vertex_count"]
+    starts = full.host["strand_vertex_start"]
+    others = np.setdiff1d(np.arange(len(strands)), guides)
+    moved = interpolation_error(rest, reference, counts)
+    assert moved.strand_error_max.max() > 0.2 * LENGTH  # the strands did move
+    rms = {}
+    for frame in ("transport", "material"):
+        for k in (1, 4):
+            sk = SkinningLBS(gmodel, guides, strands, SkinningConfig(frame=frame, neighbour_count=k))
+            sk.deform(gstate, gcontrol)
+            err = interpolation_error(sk.positions(), reference, counts)
+            assert np.all(np.isfinite(err.vertex_error))
+            # Guides simulated alone move as in the full run: zero error (float32 rounding).
+            assert err.strand_error_max[guides].max() < 1e-6
+            # Small against the strand length and against how far the strands moved.
+            assert err.strand_error_max.max() < 0.3 * LENGTH, (frame, k, err.strand_error_max.max())
+            rms[frame, k] = err.strand_error_rms[others].mean()
+            assert rms[frame, k] < 0.3 * moved.strand_error_rms[others].mean(), (frame, k, rms[frame, k])
+        # Blending 4 guides beats following the nearest one.
+        assert rms[frame, 4] < rms[frame, 1], (frame, rms)
+    # More guides, smaller error: 30 % guides driven by the reference motion of those strands.
+    guides3, gmodel3 = build_guides(strands, RodMaterial(), SkinningConfig(guide_ratio=0.3, seed=3))
+    state3, control3 = gmodel3.state(), gmodel3.control()
+    rows = np.concatenate([np.arange(starts[s], starts[s] + counts[s]) for s in guides3])
+    state3.vertex_position.from_numpy(reference[rows].astype(np.float32))
+    control3.set_body_transform(0, nod(10 * dt), np.zeros(3))
+    sk3 = SkinningLBS(gmodel3, guides3, strands)
+    sk3.deform(state3, control3)
+    err3 = interpolation_error(sk3.positions(), reference, counts)
+    assert err3.strand_error_rms[others].mean() < 0.6 * rms["transport", 4]
