@@ -1,0 +1,168 @@
+"""Shared reader/writer machinery: bounded byte access, atomic writes, float text formatting."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import struct
+import tempfile
+import warnings
+
+import numpy as np
+
+from .errors import GroomFormatError
+from .groom import Groom
+
+# Upper bound on what a text reader accepts as a count before it has seen the data
+# (a count is then checked against the lines actually present).
+MAX_TEXT_BYTES = 1 << 34
+
+
+def read_bytes(path) -> bytes:
+    """The whole file (its size bounds every later allocation); an empty file is an error."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    if not data:
+        raise GroomFormatError(path, "the file is empty")
+    return data
+
+
+class ByteReader:
+    """Little-endian access to a byte string that checks every range against its size first."""
+
+    def __init__(self, data: bytes, path):
+        self.data = data
+        self.size = len(data)
+        self.path = path
+
+    def need(self, offset: int, nbytes: int, what: str) -> None:
+        if offset < 0 or nbytes < 0 or offset + nbytes > self.size:
+            have = max(self.size - offset, 0)
+            raise GroomFormatError(self.path, f"{what} needs {nbytes} bytes but the file has {have} bytes left "
+                                              f"(file size {self.size})", offset=offset)
+
+    def unpack(self, fmt: str, offset: int, what: str):
+        n = struct.calcsize("<" + fmt)
+        self.need(offset, n, what)
+        return struct.unpack_from("<" + fmt, self.data, offset)
+
+    def array(self, offset: int, dtype, count: int, what: str) -> np.ndarray:
+        """A read-only view of ``count`` items at ``offset`` (no allocation)."""
+        dt = np.dtype(dtype).newbyteorder("<")
+        if count < 0:
+            raise GroomFormatError(self.path, f"{what}: negative count {count}", offset=offset)
+        self.need(offset, count * dt.itemsize, what)
+        return np.frombuffer(self.data, dtype=dt, count=count, offset=offset)
+
+
+def check_count(path, value: int, what: str, upper: int, offset: int | None = None, line: int | None = None,
+                minimum: int = 0) -> int:
+    """A count from a header: within [minimum, upper], else GroomFormatError (before any allocation)."""
+    if value < minimum:
+        raise GroomFormatError(path, f"{what} is {value}; expected at least {minimum}", offset=offset, line=line)
+    if value > upper:
+        raise GroomFormatError(path, f"{what} {value} is more than the file can hold (at most {upper})",
+                               offset=offset, line=line)
+    return int(value)
+
+
+def finish(groom: Groom, path) -> Groom:
+    """Validate a freshly read groom, turning ValueError into GroomFormatError naming the file."""
+    try:
+        groom.validate()
+    except ValueError as exc:
+        msg = str(exc)
+        if msg.startswith("Groom: "):
+            msg = msg[len("Groom: "):]
+        raise GroomFormatError(path, msg) from None
+    return groom
+
+
+def offsets_from_counts(counts: np.ndarray) -> np.ndarray:
+    off = np.zeros(len(counts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=off[1:])
+    return off
+
+
+def warn_skipped(path, skipped: int, total: int, why: str = "fewer than 2 points") -> None:
+    if skipped:
+        warnings.warn(f"{os.fspath(path)}: skipped {skipped} of {total} strands with {why}", stacklevel=4)
+
+
+# ---------------------------------------------------------------- text
+def float_text(values: np.ndarray) -> np.ndarray:
+    """Shortest round-trip decimal text of each value, for its own dtype (float32 or float64)."""
+    values = np.asarray(values)
+    if values.dtype == np.float32:
+        # repr() of a Python float of a float32 is the float64 shortest string, which may carry
+        # more digits than needed but still parses back (as float32) to the same bits; use
+        # NumPy's float32-shortest formatting instead to keep files small.
+        fmt = np.format_float_positional
+        return np.array([fmt(v, unique=True, trim="-") for v in values.ravel()], dtype=object).reshape(values.shape)
+    return np.array([repr(float(v)) for v in values.ravel()], dtype=object).reshape(values.shape)
+
+
+def rows_text(arr: np.ndarray, prefix: str = "") -> str:
+    """Lines ``prefix a b c`` for each row of a 2-D float array, each number round-trip exact."""
+    arr = np.asarray(arr)
+    if arr.size == 0:
+        return ""
+    # float32 -> str via the float32 repr: np.ndarray.astype(str) uses the shortest
+    # round-trip representation of each element's own dtype (NumPy >= 1.14).
+    txt = arr.astype(str)
+    cols = [txt[:, j] for j in range(arr.shape[1])]
+    out = np.char.add(prefix, cols[0]) if prefix else cols[0]
+    for c in cols[1:]:
+        out = np.char.add(np.char.add(out, " "), c)
+    return "\n".join(out.tolist()) + "\n"
+
+
+def parse_floats(tokens: list[str], dtype, path, what: str, line: int | None = None) -> np.ndarray:
+    try:
+        return np.array(tokens, dtype=np.float64).astype(dtype) if dtype == np.float64 else \
+            np.array(tokens, dtype=dtype)
+    except (ValueError, OverflowError) as exc:
+        raise GroomFormatError(path, f"{what}: not a number ({exc})", line=line) from None
+
+
+# ---------------------------------------------------------------- atomic writes
+def _fdopen(fd: int):
+    """Open the temporary file's descriptor for writing (a seam for the atomic-write tests)."""
+    return os.fdopen(fd, "wb")
+
+
+@contextlib.contextmanager
+def atomic_path(path, suffix: str = ""):
+    """Yield a temporary path in the target's directory; ``os.replace`` it onto ``path`` on success.
+
+    On any exception the temporary file is removed and ``path`` is left as it was.
+    """
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=d, prefix="." + os.path.basename(path) + ".", suffix=".tmp" + suffix)
+    os.close(fd)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+@contextlib.contextmanager
+def atomic_open(path):
+    """Yield a binary file object on a temporary file; flushed and renamed onto ``path`` on success."""
+    with atomic_path(path) as tmp:
+        fh = _fdopen(os.open(tmp, os.O_WRONLY | os.O_TRUNC))
+        try:
+            yield fh
+        finally:
+            fh.close()
+
+
+def prepare_write(groom: Groom, what: str) -> Groom:
+    """Validate a groom before writing (raises ValueError naming the strand and field)."""
+    if not isinstance(groom, Groom):
+        raise TypeError(f"{what}: expected a Groom, got {type(groom).__name__}")
+    return groom.validate()
