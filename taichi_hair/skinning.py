@@ -131,14 +131,23 @@ def select_guides(root_positions, guide_ratio: float = 0.1, seed: int = 0) -> np
     n = roots.shape[0]
     if n == 0:
         raise ValueError("select_guides: field 'root_positions' is empty")
+    from scipy.spatial import cKDTree
+
     count = min(n, max(1, int(round(guide_ratio * n))))
     chosen = np.empty(count, dtype=np.int64)
     chosen[0] = int(np.random.default_rng(seed).integers(n))
     dist2 = np.sum((roots - roots[chosen[0]]) ** 2, axis=1)
+    tree = cKDTree(roots)
     for c in range(1, count):
         nxt = int(np.argmax(dist2))
         chosen[c] = nxt
-        np.minimum(dist2, np.sum((roots - roots[nxt]) ** 2, axis=1), out=dist2)
+        # Only roots closer to the new guide than the current maximum distance can get
+        # closer: update those (a ball query) instead of all n; same result as brute force.
+        near = np.asarray(tree.query_ball_point(roots[nxt], math.sqrt(dist2[nxt]) * (1.0 + 1e-9) + 1e-300),
+                          dtype=np.int64)
+        if near.size:
+            d2 = np.sum((roots[near] - roots[nxt]) ** 2, axis=1)
+            dist2[near] = np.minimum(dist2[near], d2)
     return chosen
 
 
@@ -186,19 +195,38 @@ def _as_points(a, name: str) -> np.ndarray:
 
 
 def _as_polylines(strands, name: str) -> list:
-    if isinstance(strands, np.ndarray) and strands.ndim == 3:
-        strands = list(strands)
-    try:
-        out = [_as_points(p, f"{name}[{i}]") for i, p in enumerate(strands)]
-    except TypeError:
-        raise ValueError(f"{name} must be a sequence of (m, 3) polylines") from None
+    """Validate render polylines (vectorised over strands); returns a list of (m_s, 3) float64 arrays."""
+    if isinstance(strands, np.ndarray) and strands.ndim == 3 and strands.shape[2] == 3:
+        out = list(np.asarray(strands, dtype=np.float64))
+    else:
+        out = []
+        try:
+            for i, p in enumerate(strands):
+                try:
+                    a = np.asarray(p, dtype=np.float64)
+                except (TypeError, ValueError) as exc:
+                    raise ValueError(f"{name}[{i}] is not a numeric array ({exc})") from None
+                if a.ndim != 2 or a.shape[1] != 3:
+                    raise ValueError(f"{name}[{i}] must have shape (m, 3), got {a.shape}")
+                out.append(a)
+        except TypeError:
+            raise ValueError(f"{name} must be a sequence of (m, 3) polylines") from None
     if not out:
         raise ValueError(f"{name} is empty")
-    for i, p in enumerate(out):
-        if p.shape[0] < 2:
-            raise ValueError(f"{name}[{i}] has {p.shape[0]} vertices; a strand needs at least 2")
-        if np.any(np.linalg.norm(np.diff(p, axis=0), axis=1) == 0.0):
-            raise ValueError(f"{name}[{i}] has a zero-length edge (repeated point)")
+    counts = np.array([p.shape[0] for p in out], dtype=np.int64)
+    short = np.where(counts < 2)[0]
+    if short.size:
+        i = int(short[0])
+        raise ValueError(f"{name}[{i}] has {counts[i]} vertices; a strand needs at least 2")
+    flat = np.concatenate(out)
+    strand_of = np.repeat(np.arange(counts.size), counts)
+    bad = np.where(~np.all(np.isfinite(flat), axis=1))[0]
+    if bad.size:
+        raise ValueError(f"{name}[{int(strand_of[bad[0]])}] has a non-finite coordinate")
+    same = strand_of[1:] == strand_of[:-1]
+    zero = np.where(same & np.all(flat[1:] == flat[:-1], axis=1))[0]
+    if zero.size:
+        raise ValueError(f"{name}[{int(strand_of[zero[0]])}] has a zero-length edge (repeated point)")
     return out
 
 
@@ -273,13 +301,17 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     if np.unique(gidx).size != gidx.size:
         raise ValueError("compute_binding: field 'guide_indices' has repeated strands")
     X = h["vertex_rest_position"].astype(np.float64)
-    for g, s in enumerate(gidx):
-        gp = X[gstart[g]:gstart[g] + gcount[g]]
-        if gp.shape != polylines[s].shape or not np.allclose(gp, polylines[s], rtol=0.0, atol=1e-9):
-            raise ValueError(f"compute_binding: field 'guide_indices': guide {g} is not render strand {s} "
-                             "(different rest polyline)")
-
     counts = np.array([p.shape[0] for p in polylines], dtype=np.int64)
+    mismatch = np.where(counts[gidx] != gcount)[0]
+    if not mismatch.size:
+        gp = np.concatenate([polylines[s] for s in gidx])
+        far = np.any(np.abs(gp - X) > 1e-9, axis=1)
+        mismatch = np.unique(np.repeat(np.arange(ng), gcount)[far])
+    if mismatch.size:
+        g = int(mismatch[0])
+        raise ValueError(f"compute_binding: field 'guide_indices': guide {g} is not render strand {int(gidx[g])} "
+                         "(different rest polyline)")
+
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     P = np.concatenate(polylines)
     nv = P.shape[0]
@@ -302,10 +334,12 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     guide_of_strand[gidx] = np.arange(ng)
     is_guide = guide_of_strand >= 0
     gs = np.where(is_guide)[0]
-    for s in gs:
-        g = guide_of_strand[s]
-        others = [q for q in nbr[s] if q != g][:K - 1]
-        nbr[s] = [g] + others
+    g_self = guide_of_strand[gs]
+    # Move the guide itself to slot 0 (stable: the others keep their order); if it was not
+    # among its k nearest (several roots at one point), it replaces slot 0.
+    order = np.argsort(nbr[gs] != g_self[:, None], axis=1, kind="stable")
+    nbr[gs] = np.take_along_axis(nbr[gs], order, axis=1)
+    nbr[gs, 0] = g_self
     w[is_guide] = 0.0
     w[is_guide, 0] = 1.0
     w /= w.sum(axis=1, keepdims=True)

@@ -75,6 +75,19 @@ def test_fps_spreads_roots_and_is_deterministic():
     assert select_guides(roots, 1e-6).shape == (1,)
 
 
+def test_fps_matches_brute_force_farthest_point_sampling():
+    """The ball-query FPS gives the same picks as the textbook O(n m) loop."""
+    roots = np.random.default_rng(4).normal(size=(1500, 3)) * [0.1, 0.05, 0.08]
+    for ratio, seed in ((0.1, 0), (0.4, 9)):
+        count = int(round(ratio * len(roots)))
+        picks = [int(np.random.default_rng(seed).integers(len(roots)))]
+        d2 = np.sum((roots - roots[picks[0]]) ** 2, axis=1)
+        for _ in range(count - 1):
+            picks.append(int(np.argmax(d2)))
+            d2 = np.minimum(d2, np.sum((roots - roots[picks[-1]]) ** 2, axis=1))
+        assert np.array_equal(select_guides(roots, ratio, seed), picks)
+
+
 def test_build_guides_uses_the_chosen_polylines_and_materials():
     strands = smooth_groom(30)
     mats = [RodMaterial(radius=4e-5 + 1e-6 * i) for i in range(30)]
