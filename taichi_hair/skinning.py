@@ -286,6 +286,10 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     from scipy.spatial import cKDTree
 
     _check_neighbours("compute_binding: field 'neighbour_count'", neighbour_count)
+    if frame not in FRAMES:
+        raise ValueError(f"compute_binding: field 'frame' must be one of {FRAMES}, got {frame!r}")
+    if frame == "material" and guide_rest_frames is None:
+        raise ValueError("compute_binding: field 'guide_rest_frames' is needed for frame='material'")
     polylines = _as_polylines(strands, "compute_binding: field 'strands'")
     h = guide_model.host
     gstart = h["strand_vertex_start"].astype(np.int64)
@@ -369,12 +373,8 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         t = h["edge_rest_tangent"].astype(np.float64)
         d1 = h["edge_rest_director"].astype(np.float64)
         d2 = np.cross(t, d1)
-    elif frame == "material":
-        if guide_rest_frames is None:
-            raise ValueError("compute_binding: field 'guide_rest_frames' is needed for frame='material'")
-        t, d1, d2 = (np.asarray(a, dtype=np.float64) for a in guide_rest_frames)
     else:
-        raise ValueError(f"compute_binding: field 'frame' must be one of {FRAMES}, got {frame!r}")
+        t, d1, d2 = (np.asarray(a, dtype=np.float64) for a in guide_rest_frames)
     local_c = np.empty((nv, K, 3))
     for k in range(K):
         jk, uk = j[:, k], u[:, k][:, None]
@@ -512,7 +512,17 @@ class SkinningLBS:
         strands: the render polylines (all strands, guides included), root first [m].
         config: :class:`SkinningConfig` (``neighbour_count`` and ``frame`` are used).
         strand_body: body each render root is clamped to: an int for all, a per-strand
-            sequence, or -1 for free roots (no pinning).  Default 0.
+            sequence, or -1 for free roots (no pinning; use -1 for guides built with
+            ``root="free"``).  Default 0.
+
+    Example::
+
+        guides, guide_model = build_guides(strands, RodMaterial())
+        skin = SkinningLBS(guide_model, guides, strands)
+        state, control = guide_model.state(), guide_model.control()
+        solver = SolverADMM(guide_model)
+        solver.step(state, control, 1 / 96)
+        skin.deform(state, control)          # skin.fields.render_vertex_position
 
     Attributes:
         fields: :class:`SkinningFields` (binding, guide frames, output positions).
