@@ -53,11 +53,21 @@ def read_usd(path) -> Groom:
         raise GroomFormatError(path, "the file is empty")
     Sdf, Tf, Usd, UsdGeom, Vt = _pxr()
     try:
-        stage = Usd.Stage.Open(os.fspath(path), Usd.Stage.LoadAll)
-    except Tf.ErrorException as exc:
-        first = str(exc).strip().splitlines()
-        raise GroomFormatError(path, f"USD could not open the stage ({first[-1] if first else 'unknown error'})") \
-            from None
+        return _read_stage(path, Usd, UsdGeom)
+    except GroomFormatError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - pxr raises Tf.ErrorException, and for bad bytes
+        # UnicodeDecodeError, IndexError...: every failure inside USD is a malformed file here.
+        try:
+            lines = str(exc).strip().splitlines()
+        except Exception:  # noqa: BLE001 - Tf.ErrorException.__str__ fails on messages with bad UTF-8
+            lines = ["(the USD error message is not valid UTF-8)"]
+        raise GroomFormatError(path, f"USD could not read the stage ({type(exc).__name__}: "
+                                     f"{lines[-1][:200] if lines else 'no message'})") from None
+
+
+def _read_stage(path, Usd, UsdGeom) -> Groom:
+    stage = Usd.Stage.Open(os.fspath(path), Usd.Stage.LoadAll)
     if stage is None:
         raise GroomFormatError(path, "USD could not open the stage")
     prims = [p for p in stage.Traverse() if p.IsA(UsdGeom.BasisCurves)]
