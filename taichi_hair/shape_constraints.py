@@ -125,11 +125,13 @@ def global_stiffness_at(stiffness: float, effective_range: float, falloff: float
 
     Full ``stiffness`` up to ``effective_range * (1 - falloff)``, then a linear ramp to zero at
     ``effective_range``; zero beyond.  ``falloff = 0`` is TressFX's step cut-off, ``falloff = 1``
-    a linear decrease over the whole range.
+    a linear decrease over the whole range; ``effective_range = 0`` disables the constraint.
     """
     ramp = 1.0
     width = falloff * effective_range
-    if width > 0.0:
+    if effective_range <= 0.0:
+        ramp = 0.0
+    elif width > 0.0:
         ramp = ti.math.clamp((effective_range - u) / width, 0.0, 1.0)
     elif u > effective_range:
         ramp = 0.0

@@ -217,6 +217,12 @@ class SolverShape:
             ``[0, len(config.regions))``; default all 0.
         profile: if True, synchronise after each stage and accumulate wall times in
             ``stage_seconds`` (slower; for benchmarks).
+        collider_capacity: most colliders ``config.colliders`` may hold after
+            :meth:`upload_colliders`; default ``len(config.colliders)``.
+
+    Regions, strand regions and colliders may be edited between steps (an interactive tool's
+    sliders, Sec. 6 Fig. 4): change ``config.regions`` or ``config.colliders`` and call
+    :meth:`upload_regions` / :meth:`upload_colliders`, or call :meth:`set_strand_region`.
 
     Fields (all allocated here, shape (vertex_count,) unless stated):
         vertex_rest_rotation: ^wR_i^0, rest global rotation of frame i, quaternion (x, y, z, w) [-].
@@ -227,11 +233,11 @@ class SolverShape:
         strand_region: region id, shape (strand_count,) [-].
         strand_head_rotation: ^wR_H of the strand's body, quaternion, shape (strand_count,) [-].
         region_*: the :class:`ShapeRegion` values, shape (region_count,).
-        collider_*: kind, body, points a/b [m] (body frame) and radius [m], shape (max(1, collider_count),).
+        collider_*: kind, body, points a/b [m] (body frame) and radius [m], shape (max(1, collider_capacity),).
     """
 
     def __init__(self, model: Model, config: SolverShapeConfig | None = None, strand_region=None,
-                 profile: bool = False):
+                 profile: bool = False, collider_capacity: int | None = None):
         self.model = model
         self.config = config or SolverShapeConfig()
         cfg = self.config
@@ -239,21 +245,12 @@ class SolverShape:
         h = model.host
         n, ns = model.vertex_count, model.strand_count
         self.region_count = len(cfg.regions)
-        if strand_region is None:
-            regions = np.zeros(ns, np.int32)
-        else:
-            regions = np.asarray(strand_region).reshape(-1)
-            if regions.shape != (ns,) or not np.issubdtype(regions.dtype, np.integer):
-                raise ValueError(f"SolverShape.strand_region must be {ns} integers (one per strand), "
-                                 f"got shape {regions.shape} of {regions.dtype}")
-            bad = np.where((regions < 0) | (regions >= self.region_count))[0]
-            if bad.size:
-                raise ValueError(f"SolverShape.strand_region[{int(bad[0])}] = {int(regions[bad[0]])} is not a "
-                                 f"region index in [0, {self.region_count})")
-        for k, c in enumerate(cfg.colliders):
-            if not (-1 <= int(c.body) < model.body_count):
-                raise ValueError(f"SolverShapeConfig.colliders[{k}].body must be -1 or a body index in "
-                                 f"[0, {model.body_count}), got {c.body!r}")
+        regions = self._check_strand_region(strand_region)
+        if collider_capacity is None:
+            collider_capacity = len(cfg.colliders)
+        if not (isinstance(collider_capacity, (int, np.integer)) and collider_capacity >= 0):
+            raise ValueError(f"SolverShape.collider_capacity must be an integer >= 0, got {collider_capacity!r}")
+        self.collider_capacity = int(collider_capacity)
         f = _np_float()
         quat = ti.types.vector(4, float)
         # Static rest data (Algorithm 2).
@@ -277,8 +274,8 @@ class SolverShape:
         self.region_length_iterations = ti.field(ti.i32, nr)
         self.region_damping = ti.field(float, nr)
         # Colliders.
-        nc = max(1, len(cfg.colliders))
-        self.collider_count = len(cfg.colliders)
+        nc = max(1, self.collider_capacity)
+        self.collider_count = 0
         self.collider_kind = ti.field(ti.i32, nc)
         self.collider_body = ti.field(ti.i32, nc)
         self.collider_point_a = ti.field(ti.math.vec3, nc)
@@ -286,8 +283,8 @@ class SolverShape:
         self.collider_radius = ti.field(float, nc)
         self._bad = ti.field(ti.i32, ())
 
-        self.strand_region.from_numpy(regions.astype(np.int32))
-        self._upload_colliders()
+        self.strand_region.from_numpy(regions)
+        self.upload_colliders()
         # Rest arc-length fraction of each vertex, for the S_G ramp.
         starts, counts = h["strand_vertex_start"], h["strand_vertex_count"]
         le = h["edge_rest_length"]
@@ -322,8 +319,36 @@ class SolverShape:
         self._max_length_iterations = max(r.length_iterations for r in regs)
         self._any_global = any(r.global_stiffness > 0 and r.global_range > 0 for r in regs)
 
-    def _upload_colliders(self) -> None:
-        nc = max(1, self.collider_count)
+    def _check_strand_region(self, strand_region) -> np.ndarray:
+        ns = self.model.strand_count
+        if strand_region is None:
+            return np.zeros(ns, np.int32)
+        regions = np.asarray(strand_region).reshape(-1)
+        if regions.shape != (ns,) or not np.issubdtype(regions.dtype, np.integer):
+            raise ValueError(f"SolverShape.strand_region must be {ns} integers (one per strand), "
+                             f"got shape {regions.shape} of {regions.dtype}")
+        bad = np.where((regions < 0) | (regions >= self.region_count))[0]
+        if bad.size:
+            raise ValueError(f"SolverShape.strand_region[{int(bad[0])}] = {int(regions[bad[0]])} is not a "
+                             f"region index in [0, {self.region_count})")
+        return regions.astype(np.int32)
+
+    def set_strand_region(self, strand_region) -> None:
+        """Assign region ids, shape (strand_count,), values in [0, len(config.regions)) (None: all 0)."""
+        self.strand_region.from_numpy(self._check_strand_region(strand_region))
+
+    def upload_colliders(self) -> None:
+        """Copy ``config.colliders`` (at most ``collider_capacity``) to the collider fields."""
+        cfg = self.config
+        cfg.__post_init__()
+        if len(cfg.colliders) > self.collider_capacity:
+            raise ValueError(f"SolverShapeConfig.colliders holds {len(cfg.colliders)} colliders, more than the "
+                             f"solver's collider_capacity {self.collider_capacity}")
+        for k, c in enumerate(cfg.colliders):
+            if not (-1 <= int(c.body) < self.model.body_count):
+                raise ValueError(f"SolverShapeConfig.colliders[{k}].body must be -1 or a body index in "
+                                 f"[0, {self.model.body_count}), got {c.body!r}")
+        nc = max(1, self.collider_capacity)
         kind = np.zeros(nc, np.int32)
         body = np.full(nc, -1, np.int32)
         pa = np.zeros((nc, 3))
@@ -343,6 +368,7 @@ class SolverShape:
         self.collider_point_a.from_numpy(pa.astype(f))
         self.collider_point_b.from_numpy(pb.astype(f))
         self.collider_radius.from_numpy(rad.astype(f))
+        self.collider_count = len(cfg.colliders)
 
     # ------------------------------------------------------------------ stepping
     def step(self, state: State, control: Control, dt: float) -> None:
