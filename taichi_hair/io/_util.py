@@ -48,7 +48,7 @@ class ByteReader:
 
     def array(self, offset: int, dtype, count: int, what: str) -> np.ndarray:
         """A read-only view of ``count`` items at ``offset`` (no allocation)."""
-        dt = np.dtype(dtype).newbyteorder("<")
+        dt = np.dtype(dtype)  # callers spell the byte order ("<f4")
         if count < 0:
             raise GroomFormatError(self.path, f"{what}: negative count {count}", offset=offset)
         self.need(offset, count * dt.itemsize, what)

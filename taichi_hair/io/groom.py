@@ -93,14 +93,13 @@ class Groom:
     def lengths(self) -> np.ndarray:
         """Arc length of each strand [units], float64, shape (S,)."""
         pts = self.points.astype(np.float64, copy=False)
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
         off = np.asarray(self.strand_offsets, dtype=np.int64)
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
         if seg.size == 0:
             return np.zeros(self.strand_count)
-        csum = np.concatenate([[0.0], np.cumsum(seg)])
-        # The segment joining the last vertex of s to the first of s+1 is excluded:
-        # strand s spans segments off[s] .. off[s+1]-2.
-        return csum[off[1:] - 1] - csum[off[:-1]]
+        seg[off[1:-1] - 1] = 0.0  # the fake segments joining a tip to the next strand's root
+        # Strand s sums seg[off[s]:off[s + 1] - 1] (plus its zeroed join).
+        return np.add.reduceat(seg, off[:-1])
 
     # ------------------------------------------------------------------ construction
     @classmethod

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 import warnings
 
 import numpy as np
@@ -67,7 +68,20 @@ def read_usd(path) -> Groom:
 
 
 def _read_stage(path, Usd, UsdGeom) -> Groom:
-    stage = Usd.Stage.Open(os.fspath(path), Usd.Stage.LoadAll)
+    name = os.fspath(path)
+    if os.path.splitext(name)[1].lower() in (".usd", ".usda", ".usdc", ".usdz"):
+        return _read_open_stage(path, Usd.Stage.Open(name, Usd.Stage.LoadAll), Usd, UsdGeom)
+    # USD picks its parser by extension: open a misnamed file through a link with the right one.
+    with open(name, "rb") as fh:
+        magic = fh.read(8)
+    ext = ".usdc" if magic.startswith(b"PXR-USDC") else ".usdz" if magic.startswith(b"PK") else ".usda"
+    with tempfile.TemporaryDirectory() as d:
+        link = os.path.join(d, "stage" + ext)
+        os.symlink(os.path.abspath(name), link)
+        return _read_open_stage(path, Usd.Stage.Open(link, Usd.Stage.LoadAll), Usd, UsdGeom)
+
+
+def _read_open_stage(path, stage, Usd, UsdGeom) -> Groom:
     if stage is None:
         raise GroomFormatError(path, "USD could not open the stage")
     prims = [p for p in stage.Traverse() if p.IsA(UsdGeom.BasisCurves)]
@@ -77,22 +91,23 @@ def _read_stage(path, Usd, UsdGeom) -> Groom:
     params: dict = {}
     units = ""
     for p in prims:
-        cd = p.GetCustomData()
-        if "taichiHair:params" in cd:
+        text = p.GetCustomDataByKey("taichiHair:params")  # a namespaced key: nested dictionaries
+        if text is not None:
             try:
-                more = json.loads(cd["taichiHair:params"])
+                more = json.loads(text)
             except (TypeError, ValueError) as exc:
                 raise GroomFormatError(path, f"{p.GetPath()}: customData taichiHair:params is not JSON ({exc})") \
                     from None
             if isinstance(more, dict):
                 params.update(more)
-        units = str(cd.get("taichiHair:units", units))
+        units = str(p.GetCustomDataByKey("taichiHair:units") or units)
     if not units and stage.HasAuthoredMetadata("metersPerUnit"):
         mpu = UsdGeom.GetStageMetersPerUnit(stage)
         units = next((u for u, v in UNIT_METRES.items() if abs(mpu - v) <= 1e-9 * v), "")
         if not units:
             params["usd_meters_per_unit"] = float(mpu)
-    params["usd_curve_type"] = parts[0]["type"]
+    if parts[0]["type"] != "linear":
+        params["usd_curve_type"] = parts[0]["type"]
     if len(prims) > 1:
         params["usd_prims"] = [str(p.GetPath()) for p in prims]
     if any(p["frames"] is not None for p in parts):
