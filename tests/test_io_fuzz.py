@@ -5,7 +5,6 @@ another exception, a crash, a hang, or an allocation out of proportion to the
 file (checked with tracemalloc, which sees NumPy's allocations).
 """
 
-import os
 import struct
 import time
 import tracemalloc

@@ -13,11 +13,6 @@ import numpy as np
 from .errors import GroomFormatError
 from .groom import Groom
 
-# Upper bound on what a text reader accepts as a count before it has seen the data
-# (a count is then checked against the lines actually present).
-MAX_TEXT_BYTES = 1 << 34
-
-
 def read_bytes(path) -> bytes:
     """The whole file (its size bounds every later allocation); an empty file is an error."""
     with open(path, "rb") as fh:
@@ -87,42 +82,6 @@ def offsets_from_counts(counts: np.ndarray) -> np.ndarray:
 def warn_skipped(path, skipped: int, total: int, why: str = "fewer than 2 points") -> None:
     if skipped:
         warnings.warn(f"{os.fspath(path)}: skipped {skipped} of {total} strands with {why}", stacklevel=4)
-
-
-# ---------------------------------------------------------------- text
-def float_text(values: np.ndarray) -> np.ndarray:
-    """Shortest round-trip decimal text of each value, for its own dtype (float32 or float64)."""
-    values = np.asarray(values)
-    if values.dtype == np.float32:
-        # repr() of a Python float of a float32 is the float64 shortest string, which may carry
-        # more digits than needed but still parses back (as float32) to the same bits; use
-        # NumPy's float32-shortest formatting instead to keep files small.
-        fmt = np.format_float_positional
-        return np.array([fmt(v, unique=True, trim="-") for v in values.ravel()], dtype=object).reshape(values.shape)
-    return np.array([repr(float(v)) for v in values.ravel()], dtype=object).reshape(values.shape)
-
-
-def rows_text(arr: np.ndarray, prefix: str = "") -> str:
-    """Lines ``prefix a b c`` for each row of a 2-D float array, each number round-trip exact."""
-    arr = np.asarray(arr)
-    if arr.size == 0:
-        return ""
-    # float32 -> str via the float32 repr: np.ndarray.astype(str) uses the shortest
-    # round-trip representation of each element's own dtype (NumPy >= 1.14).
-    txt = arr.astype(str)
-    cols = [txt[:, j] for j in range(arr.shape[1])]
-    out = np.char.add(prefix, cols[0]) if prefix else cols[0]
-    for c in cols[1:]:
-        out = np.char.add(np.char.add(out, " "), c)
-    return "\n".join(out.tolist()) + "\n"
-
-
-def parse_floats(tokens: list[str], dtype, path, what: str, line: int | None = None) -> np.ndarray:
-    try:
-        return np.array(tokens, dtype=np.float64).astype(dtype) if dtype == np.float64 else \
-            np.array(tokens, dtype=dtype)
-    except (ValueError, OverflowError) as exc:
-        raise GroomFormatError(path, f"{what}: not a number ({exc})", line=line) from None
 
 
 # ---------------------------------------------------------------- atomic writes

@@ -43,7 +43,6 @@ def read_hair(path) -> Groom:
         raise GroomFormatError(path, f"expected the magic 'HAIR', found {data[:4]!r}", offset=0)
     ns, npts, bits, dseg = r.unpack("4I", 4, "header counts")
     dthick, dtransp = r.unpack("2f", 20, "header defaults")
-    dcolor = r.unpack("3f", 28, "default colour")
     info = data[40:128].split(b"\0", 1)[0].decode("latin-1")
     if bits & ~KNOWN_BITS:
         raise GroomFormatError(path, f"unknown array flags 0x{bits & ~KNOWN_BITS:x} in the bit field 0x{bits:x} "

@@ -84,13 +84,11 @@ def read_obj(path, dtype=np.float32) -> Groom:
 
 def write_obj(groom: Groom, path) -> None:
     g = prepare_write(groom, "write_obj")
-    txt = g.points.astype(str)
-    rows = np.char.add(np.char.add(np.char.add(np.char.add(np.char.add("v ", txt[:, 0]), " "), txt[:, 1]), " "),
-                       txt[:, 2])
+    txt = g.points.astype(str)  # each value's shortest round-trip text in its own dtype
     idx = (np.arange(g.vertex_count) + 1).astype(str)
     with atomic_open(path) as fh:
         fh.write(f"# taichi-hair: {g.strand_count} strands, {g.vertex_count} vertices\n".encode("ascii"))
-        fh.write(("\n".join(rows.tolist()) + "\n").encode("ascii"))
+        fh.write(("v " + "\nv ".join(map(" ".join, txt.tolist())) + "\n").encode("ascii"))
         off = g.strand_offsets
         lines = ["l " + " ".join(idx[off[s]:off[s + 1]].tolist()) for s in range(g.strand_count)]
         fh.write(("\n".join(lines) + "\n").encode("ascii"))

@@ -361,7 +361,4 @@ def write_ply(groom: Groom, path, ascii: bool = False) -> None:
 
 
 def _join_rows(txt: np.ndarray) -> str:
-    out = txt[:, 0]
-    for j in range(1, txt.shape[1]):
-        out = np.char.add(np.char.add(out, " "), txt[:, j])
-    return "\n".join(out.tolist()) + "\n"
+    return "\n".join(map(" ".join, txt.tolist())) + "\n"

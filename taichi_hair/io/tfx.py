@@ -228,10 +228,9 @@ def write_tfx(groom: Groom, path, version: float = 4.0) -> None:
             fh.write(head)
             fh.write(pts.tobytes())
         elif version == 2.0:
-            out = [f"version 2.0", f"numStrands {ns}", "is sorted 1"]
+            out = ["version 2.0", f"numStrands {ns}", "is sorted 1"]
             txt = g.points.astype(np.float32).astype(str)
-            rows = np.char.add(np.char.add(np.char.add(np.char.add(txt[:, 0], " "), txt[:, 1]), " "), txt[:, 2])
-            rows = rows.tolist()
+            rows = list(map(" ".join, txt.tolist()))
             for s in range(ns):
                 a, b = int(g.strand_offsets[s]), int(g.strand_offsets[s + 1])
                 out.append(f"strand {s} numVerts {b - a} texcoord 0.0 0.0")

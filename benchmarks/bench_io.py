@@ -1,0 +1,144 @@
+"""Groom file I/O throughput: save and load of a generated groom in every writable format.
+
+    python benchmarks/bench_io.py                      # 100k strands x 32 vertices, all formats
+    python benchmarks/bench_io.py --strands 10000 --formats hair ply
+
+For each format: the file size, the best of ``--repeat`` wall times of
+``save_groom`` and ``load_groom`` (ms), throughput in MB/s of file bytes and in
+strands/s, and a bit-for-bit check of the loaded points.  Prints a table and
+writes ``benchmarks/results/io.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
+import warnings
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+from taichi_hair.io import Groom, load_groom, save_groom  # noqa: E402
+
+# (label, format, extension, writer options)
+CASES = [
+    ("hair", "hair", ".hair", {}),
+    ("data", "data", ".data", {}),
+    ("ply-binary", "ply", ".ply", {}),
+    ("ply-ascii", "ply", ".ply", {"ascii": True}),
+    ("obj", "obj", ".obj", {}),
+    ("tfx-v4", "tfx", ".tfx", {"version": 4.0}),
+    ("tfx-v3", "tfx", ".tfx", {"version": 3.0}),
+    ("tfx-v2-ascii", "tfx", ".tfx", {"version": 2.0}),
+    ("usdc", "usd", ".usdc", {}),
+    ("usda", "usd", ".usda", {}),
+    ("thair", "thair", ".thair.npz", {}),
+]
+
+
+def make_groom(strands: int, vertices: int, seed: int = 0) -> Groom:
+    """Strands of 20 cm from roots on a 10 cm sphere, with a small random walk (float32, metres)."""
+    rng = np.random.default_rng(seed)
+    roots = rng.normal(size=(strands, 3))
+    roots /= np.linalg.norm(roots, axis=1, keepdims=True)
+    step = 0.2 / (vertices - 1)
+    walk = roots[:, None, :] * step + rng.normal(scale=0.2 * step, size=(strands, vertices, 3))
+    walk[:, 0] = roots * 0.1
+    pts = np.cumsum(walk, axis=1).reshape(-1, 3).astype(np.float32)
+    offsets = np.arange(strands + 1, dtype=np.int64) * vertices
+    return Groom(points=pts, strand_offsets=offsets, units="m").validate()
+
+
+def best_time(fn, repeat: int) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--strands", type=int, default=100_000)
+    p.add_argument("--vertices", type=int, default=32, help="vertices per strand")
+    p.add_argument("--repeat", type=int, default=3, help="best of this many runs (text formats: 1)")
+    p.add_argument("--formats", nargs="*", default=None, help="labels to run (default: all)")
+    p.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "io.json"))
+    p.add_argument("--tmp", default=None, help="folder for the files (default: a fresh temporary folder)")
+    args = p.parse_args(argv)
+    try:
+        import pxr  # noqa: F401
+        have_usd = True
+    except ImportError:
+        have_usd = False
+    groom = make_groom(args.strands, args.vertices)
+    tmp = tempfile.mkdtemp(prefix="bench_io_", dir=args.tmp)
+    rows = []
+    try:
+        for label, fmt, ext, opts in CASES:
+            if args.formats and label not in args.formats:
+                continue
+            if fmt == "usd" and not have_usd:
+                print(f"{label}: skipped (usd-core not installed)")
+                continue
+            text = label in ("ply-ascii", "obj", "tfx-v2-ascii", "usda")
+            repeat = 1 if text else args.repeat
+            path = os.path.join(tmp, "groom" + ext)
+            t_save = best_time(lambda: save_groom(groom, path, format=fmt, **opts), repeat)
+            size = os.path.getsize(path)
+            loaded = []
+
+            def load():
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    loaded[:] = [load_groom(path, format=fmt)]
+
+            t_load = best_time(load, repeat)
+            g = loaded[0]
+            exact = bool(np.array_equal(g.points.view(np.uint32), groom.points.view(np.uint32))
+                         and np.array_equal(g.strand_offsets, groom.strand_offsets))
+            mb = size / 1e6
+            rows.append(dict(format=label, file_mb=mb, save_ms=1e3 * t_save, load_ms=1e3 * t_load,
+                             save_mb_s=mb / t_save, load_mb_s=mb / t_load, save_strands_s=args.strands / t_save,
+                             load_strands_s=args.strands / t_load, repeat=repeat, bit_exact=exact))
+            os.remove(path)
+            r = rows[-1]
+            print(f"{label:>13}: {mb:8.1f} MB  save {r['save_ms']:9.1f} ms {r['save_mb_s']:8.1f} MB/s  "
+                  f"load {r['load_ms']:9.1f} ms {r['load_mb_s']:8.1f} MB/s  exact {exact}", flush=True)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    header = (f"{'format':>13} {'file MB':>8} {'save ms':>9} {'save MB/s':>9} {'save strands/s':>14} "
+              f"{'load ms':>9} {'load MB/s':>9} {'load strands/s':>14} {'exact':>5}")
+    print()
+    print(f"groom: {args.strands} strands x {args.vertices} vertices ({args.strands * args.vertices} points, "
+          f"float32); best of {args.repeat} (text formats: 1)")
+    print(header)
+    for r in rows:
+        print(f"{r['format']:>13} {r['file_mb']:8.1f} {r['save_ms']:9.1f} {r['save_mb_s']:9.1f} "
+              f"{r['save_strands_s']:14.3g} {r['load_ms']:9.1f} {r['load_mb_s']:9.1f} {r['load_strands_s']:14.3g} "
+              f"{str(r['bit_exact']):>5}")
+    result = dict(benchmark="io", strands=args.strands, vertices_per_strand=args.vertices,
+                  repeat=args.repeat, python=platform.python_version(), numpy=np.__version__,
+                  machine=platform.machine(), processor=platform.processor(), cpu_count=os.cpu_count(),
+                  time=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), rows=rows)
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    tmp_out = args.out + ".tmp"
+    with open(tmp_out, "w") as fh:
+        json.dump(result, fh, indent=2)
+    os.replace(tmp_out, args.out)
+    print(f"wrote {args.out}")
+    return 0 if all(r["bit_exact"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
