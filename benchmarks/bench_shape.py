@@ -1,0 +1,164 @@
+"""Benchmark of SolverShape (Han & Harada 2012): milliseconds per step.
+
+Grooms at the sizes of the paper's Table 1: model 1 (~20k strands x 11 vertices,
+221k vertices) and model 3 (20k strands x 64 vertices, ~1.3M vertices), made with
+the ``hang`` scene (strands on the lower cap of a head sphere, a small curl; a
+wavier curl for model 3), with the paper's 3 sphere colliders (head and two
+shoulders) and the head nodding every step.  Iteration counts are Table 2's:
+model 1 2 edge-length and 3 local-shape iterations, model 3 3 and 4.
+
+For each size and each transform method (1 serial, 2 Jacobi, 3 rest transforms)
+it reports the mean wall time of a step (after a warm-up; kernel compilation is
+reported apart) and a per-stage split from a second, profiled pass (profiling
+synchronises after each stage, so its total is a little higher).
+
+Usage:
+    python benchmarks/bench_shape.py [--arch cpu|cuda] [--sizes 20000x11,20000x64] [--methods 1,2,3]
+                                     [--steps N] [--out FILE]
+
+Figures are printed and written as JSON (default benchmarks/results/shape_<arch>.json).
+"""
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+#: Table 2 of the paper: (edge length iterations, local shape iterations) per model size.
+TABLE2_ITERATIONS = {11: (2, 3), 64: (3, 4)}
+DT = 1.0 / 60.0
+
+
+def groom(th, strands, vertices):
+    """The hang scene with exactly ``vertices`` per strand (lengths vary by up to 15 %)."""
+    from taichi_hair.scenes import HangScene, build_hang
+
+    wavy = vertices > 32
+    length = 0.25 if not wavy else 0.32
+    scene = HangScene(strands=strands, length=length, edge_length=length / (vertices - 1),
+                      curl_radius=0.004 if wavy else 0.002, curl_pitch=0.03 if wavy else 0.06)
+    return scene, build_hang(scene)
+
+
+def machine() -> dict:
+    info = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+            "cpu_count": os.cpu_count(), "python": platform.python_version()}
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    info["cpu_model"] = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    try:
+        info["load_average_1min"] = os.getloadavg()[0]
+    except OSError:
+        pass
+    return info
+
+
+def bench_size(th, ti, strands, vertices, methods, steps):
+    from taichi_hair.scenes import nod_rotation
+    from taichi_hair.solver_shape import ShapeRegion, ShapeSphereCollider, SolverShape, SolverShapeConfig
+
+    scene, model = groom(th, strands, vertices)
+    length_its, local_its = TABLE2_ITERATIONS.get(vertices, (3, 4))
+    region = ShapeRegion(global_stiffness=0.2, global_range=0.3, local_stiffness=0.8, local_iterations=local_its,
+                         length_iterations=length_its, damping=0.05)
+    colliders = (ShapeSphereCollider((0.0, 0.0, 0.0), scene.sphere_radius, body=0),
+                 ShapeSphereCollider((0.15, -0.3, 0.0), 0.08), ShapeSphereCollider((-0.15, -0.3, 0.0), 0.08))
+    rows = []
+    state, control = model.state(), model.control()
+    snapshot = state.to_numpy()
+    for method in methods:
+        state.load(snapshot)
+        solver = SolverShape(model, SolverShapeConfig(method=method, regions=(region,), colliders=colliders))
+        t = 0.0
+
+        def step():
+            nonlocal t
+            t += DT
+            control.set_body_transform(0, nod_rotation(scene, t), (0.0, 0.0, 0.0))
+            solver.step(state, control, DT)
+
+        t0 = time.perf_counter()
+        step()
+        ti.sync()
+        compile_s = time.perf_counter() - t0
+        for _ in range(2):
+            step()
+        ti.sync()
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            step()
+        ti.sync()
+        ms = 1e3 * (time.perf_counter() - t0) / steps
+        solver.profile = True
+        for _ in range(steps):
+            step()
+        stage_ms = {k: 1e3 * v / steps for k, v in solver.stage_seconds.items()}
+        x = state.positions()
+        assert np.all(np.isfinite(x))
+        rows.append({"strands": model.strand_count, "vertices_per_strand": vertices, "vertices": model.vertex_count,
+                     "method": method, "length_iterations": length_its, "local_iterations": local_its,
+                     "colliders": len(colliders), "steps_timed": steps, "ms_per_step": ms,
+                     "compile_and_first_step_s": compile_s, "stage_ms_per_step": stage_ms})
+        stages = " ".join(f"{k}={v:.2f}" for k, v in stage_ms.items())
+        print(f"{strands:>7} x {vertices:<3} {model.vertex_count:>9} {method:>6} {ms:10.2f} {compile_s:10.2f}  {stages}",
+              flush=True)
+    return rows
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--arch", default="cpu", choices=("cpu", "cuda"))
+    p.add_argument("--sizes", default="20000x11,20000x64")
+    p.add_argument("--methods", default="1,2,3")
+    p.add_argument("--steps", type=int, default=None, help="timed steps per case (default 10 on cpu, 100 on cuda)")
+    p.add_argument("--out", default=None)
+    args = p.parse_args(argv)
+    import taichi as ti
+
+    ti.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], default_fp=ti.f32, log_level=ti.WARN)
+    import taichi_hair as th
+
+    arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
+    steps = args.steps or (10 if args.arch == "cpu" else 100)
+    methods = [int(m) for m in args.methods.split(",")]
+    version = ".".join(map(str, ti.__version__))
+    out = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "arch": arch,
+           "machine": machine(), "taichi": version,
+           "command": "python " + " ".join([os.path.relpath(__file__, os.getcwd())] + sys.argv[1:]),
+           "dt_s": DT, "results": []}
+    if arch == "cuda":
+        try:
+            import subprocess
+
+            out["machine"]["gpu"] = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+                                                   capture_output=True, text=True, timeout=20).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            pass
+    print(f"SolverShape benchmark on {arch} ({os.cpu_count()} cores), taichi {version}, dt = 1/60 s, "
+          f"{steps} timed steps")
+    print(f"{'strands x verts':>15} {'vertices':>9} {'method':>6} {'ms/step':>10} {'compile s':>10}  stage ms/step")
+    for size in args.sizes.split(","):
+        ns, nv = (int(v) for v in size.split("x"))
+        out["results"].extend(bench_size(th, ti, ns, nv, methods, steps))
+    path = args.out or os.path.join(HERE, "results", f"shape_{arch}.json")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as fh:
+        json.dump(out, fh, indent=2)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
