@@ -10,7 +10,9 @@ model 1 2 edge-length and 3 local-shape iterations, model 3 3 and 4.
 For each size and each transform method (1 serial, 2 Jacobi, 3 rest transforms)
 it reports the mean wall time of a step (after a warm-up; kernel compilation is
 reported apart) and a per-stage split from a second, profiled pass (profiling
-synchronises after each stage, so its total is a little higher).
+synchronises after each stage, so its total is a little higher).  As a quality
+proxy it also reports the RMS and largest distance of each method's vertices to
+Method 1's (the paper's reference) after the same nodding steps.
 
 Usage:
     python benchmarks/bench_shape.py [--arch cpu|cuda] [--sizes 20000x11,20000x64] [--methods 1,2,3]
@@ -77,6 +79,7 @@ def bench_size(th, ti, strands, vertices, methods, steps):
     colliders = (ShapeSphereCollider((0.0, 0.0, 0.0), scene.sphere_radius, body=0),
                  ShapeSphereCollider((0.15, -0.3, 0.0), 0.08), ShapeSphereCollider((-0.15, -0.3, 0.0), 0.08))
     rows = []
+    finals = {}
     state, control = model.state(), model.control()
     snapshot = state.to_numpy()
     for method in methods:
@@ -106,15 +109,22 @@ def bench_size(th, ti, strands, vertices, methods, steps):
         for _ in range(steps):
             step()
         stage_ms = {k: 1e3 * v / steps for k, v in solver.stage_seconds.items()}
-        x = state.positions()
+        x = state.positions().astype(np.float64)
         assert np.all(np.isfinite(x))
+        finals[method] = x
+        # Quality proxy: distance to Method 1's result after the same 3 + 2 * steps nodding steps.
+        diff = np.linalg.norm(x - finals[1], axis=1) if 1 in finals else None
         rows.append({"strands": model.strand_count, "vertices_per_strand": vertices, "vertices": model.vertex_count,
                      "method": method, "length_iterations": length_its, "local_iterations": local_its,
                      "colliders": len(colliders), "steps_timed": steps, "ms_per_step": ms,
-                     "compile_and_first_step_s": compile_s, "stage_ms_per_step": stage_ms})
+                     "compile_and_first_step_s": compile_s, "stage_ms_per_step": stage_ms,
+                     "steps_run": 3 + 2 * steps,
+                     "rms_distance_to_method1_mm": None if diff is None else 1e3 * float(np.sqrt(np.mean(diff**2))),
+                     "max_distance_to_method1_mm": None if diff is None else 1e3 * float(diff.max())})
         stages = " ".join(f"{k}={v:.2f}" for k, v in stage_ms.items())
-        print(f"{strands:>7} x {vertices:<3} {model.vertex_count:>9} {method:>6} {ms:10.2f} {compile_s:10.2f}  {stages}",
-              flush=True)
+        dist = "" if diff is None else f"{1e3 * np.sqrt(np.mean(diff**2)):8.2f} {1e3 * diff.max():8.2f}"
+        print(f"{strands:>7} x {vertices:<3} {model.vertex_count:>9} {method:>6} {ms:10.2f} {compile_s:10.2f} "
+              f"{dist:>17}  {stages}", flush=True)
     return rows
 
 
@@ -149,7 +159,8 @@ def main(argv=None):
             pass
     print(f"SolverShape benchmark on {arch} ({os.cpu_count()} cores), taichi {version}, dt = 1/60 s, "
           f"{steps} timed steps")
-    print(f"{'strands x verts':>15} {'vertices':>9} {'method':>6} {'ms/step':>10} {'compile s':>10}  stage ms/step")
+    print(f"{'strands x verts':>15} {'vertices':>9} {'method':>6} {'ms/step':>10} {'compile s':>10} "
+          f"{'vs M1 rms/max mm':>17}  stage ms/step")
     for size in args.sizes.split(","):
         ns, nv = (int(v) for v in size.split("x"))
         out["results"].extend(bench_size(th, ti, ns, nv, methods, steps))
