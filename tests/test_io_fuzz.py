@@ -5,6 +5,7 @@ another exception, a crash, a hang, or an allocation out of proportion to the
 file (checked with tracemalloc, which sees NumPy's allocations).
 """
 
+import os
 import struct
 import time
 import tracemalloc
@@ -62,11 +63,12 @@ def make_samples(tmp_path):
     try:
         import pxr  # noqa: F401
         specs.append(("usda", "usd", g, {}, False))
+        specs.append(("usdc", "usd", g, {}, False))
     except ImportError:
         pass
     out = []
     for name, fmt, groom, opts, strict in specs:
-        ext = {"usd": ".usda", "thair": ".thair.npz"}.get(fmt, "." + fmt)
+        ext = {"usd": "." + name, "thair": ".thair.npz"}.get(fmt, "." + fmt)
         p = tmp_path / f"sample_{name}{ext}"
         save_groom(groom, p, format=fmt, **opts)
         out.append((name, fmt, p.read_bytes(), strict, ext))
@@ -147,7 +149,7 @@ def test_fuzz_every_format(tmp_path):
     tally = {}
     try:
         for name, fmt, data, strict, ext in samples:
-            cases = 120 if fmt == "usd" else 400
+            cases = 150 if fmt == "usd" else 400
             path = tmp_path / f"fuzz_{name}{ext}"
             errors = total = 0
             for kind, mutated in mutations(data, rng, cases):
@@ -193,3 +195,21 @@ def test_huge_counts_fail_before_allocating(tmp_path, fmt, header, count):
             load_groom(p, format=fmt)
     finally:
         tracemalloc.stop()
+
+
+def test_usd_corrupt_crate_cannot_exhaust_memory():
+    """A fuzzed .usdc (found by this fuzzer) on which usd-core alone grows to ~4 GB resident.
+
+    read_usd caps the address space during the read, so it fails with a clean error.
+    """
+    pytest.importorskip("pxr")
+    import resource
+
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "io", "fuzzed_huge_alloc.usdc")
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
+    t0 = time.perf_counter()
+    with pytest.raises(GroomFormatError, match="fuzzed_huge_alloc.usdc"):
+        load_groom(path, format="usd")
+    grown_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mib < 2500, f"the read grew the resident set by {grown_mib:.0f} MiB"
+    assert time.perf_counter() - t0 < 5.0

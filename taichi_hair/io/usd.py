@@ -19,6 +19,7 @@ grooms round-trip bit for bit; float64 ones are rounded to float32.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -49,16 +50,51 @@ def _array(value, dtype, path, what) -> np.ndarray:
         raise GroomFormatError(path, f"{what} is not a numeric array ({exc})") from None
 
 
+# usd-core does not bound what it allocates for a corrupt crate (.usdc) file: a fuzzed file
+# can make it reserve and touch many gigabytes.  During a read the process's address space
+# may grow by at most this much plus USD_READ_BYTES_PER_FILE_BYTE times the file size
+# (Linux; RLIMIT_AS), so such a file fails with an error instead of exhausting memory.
+USD_READ_BASE_BYTES = 2 << 30
+USD_READ_BYTES_PER_FILE_BYTE = 64
+
+
+@contextlib.contextmanager
+def limited_address_space(extra_bytes: int):
+    """Cap the address space at its current size + ``extra_bytes`` for the duration (no-op where unsupported)."""
+    try:
+        import resource
+
+        soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+        with open("/proc/self/statm") as fh:
+            current = int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (ImportError, OSError, ValueError, AttributeError):
+        yield
+        return
+    limit = current + int(extra_bytes)
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    if soft != resource.RLIM_INFINITY and soft <= limit:
+        yield  # already tighter
+        return
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
 def read_usd(path) -> Groom:
     if os.path.getsize(path) == 0:  # also raises the OSError for a missing file
         raise GroomFormatError(path, "the file is empty")
     Sdf, Tf, Usd, UsdGeom, Vt = _pxr()
+    budget = USD_READ_BASE_BYTES + USD_READ_BYTES_PER_FILE_BYTE * os.path.getsize(path)
     try:
-        return _read_stage(path, Usd, UsdGeom)
+        with limited_address_space(budget):
+            return _read_stage(path, Usd, UsdGeom)
     except GroomFormatError:
         raise
     except Exception as exc:  # noqa: BLE001 - pxr raises Tf.ErrorException, and for bad bytes
-        # UnicodeDecodeError, IndexError...: every failure inside USD is a malformed file here.
+        # UnicodeDecodeError, IndexError, MemoryError...: every failure inside USD is a malformed file here.
         try:
             lines = str(exc).strip().splitlines()
         except Exception:  # noqa: BLE001 - Tf.ErrorException.__str__ fails on messages with bad UTF-8
