@@ -605,3 +605,24 @@ def test_cli_bad_file_raises_format_error(tmp_path):
         args.func(args)
     from taichi_hair.io.cli import main
     assert main(["info", str(bad)]) == 2
+
+
+def test_cli_prints_the_unit_warning_as_one_line(tmp_path, capsys):
+    g = random_groom(seed=14).scaled(100.0)  # centimetres
+    save_groom(g, tmp_path / "cm.hair")
+    args = _parser().parse_args(["info", str(tmp_path / "cm.hair")])
+    assert args.func(args) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("warning: ") and "scale=0.01" in err[0]
+
+
+def test_ponytail_into_the_builder():
+    from taichi_hair import GroomBuilder, RodMaterial
+
+    path = os.path.join(PONYTAIL, "tail.tfx")
+    if not os.path.exists(path):
+        pytest.skip("ponytail not present")
+    g = load_groom(path, scale=0.01)
+    b = GroomBuilder()
+    idx = g.add_to_builder(b, RodMaterial(radius=4e-5))
+    assert idx == list(range(255)) and b.strand_count == 255

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import json
 import math
+import sys
+import warnings
 
 import numpy as np
 
@@ -111,18 +113,35 @@ def _scale(value: str) -> float:
     return f
 
 
+def _load(path, fmt, scale) -> Groom:
+    """load_groom with its warnings printed as one ``warning:`` line each, and a missing
+    optional dependency (usd-core) reported as a ValueError so the main CLI prints one line."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            groom = load_groom(path, format=fmt, scale=scale)
+        except ImportError as exc:
+            raise ValueError(str(exc)) from None
+    for w in caught:
+        print(f"warning: {w.message}", file=sys.stderr)
+    return groom
+
+
 def cmd_convert(args) -> int:
-    groom = load_groom(args.input, format=args.from_format, scale=args.scale)
+    groom = _load(args.input, args.from_format, args.scale)
     options = {}
     if args.ascii:
         options["ascii"] = True
-    save_groom(groom, args.output, format=args.to_format, **options)
+    try:
+        save_groom(groom, args.output, format=args.to_format, **options)
+    except ImportError as exc:
+        raise ValueError(str(exc)) from None
     print(f"wrote {args.output}: {groom.strand_count} strands, {groom.vertex_count} vertices")
     return 0
 
 
 def cmd_info(args) -> int:
-    groom = load_groom(args.file, format=args.from_format, scale=args.scale)
+    groom = _load(args.file, args.from_format, args.scale)
     stats = groom_stats(groom)
     if args.json:
         print(json.dumps(stats, indent=2))
@@ -154,7 +173,6 @@ def register(subparsers) -> None:
 def main(argv=None) -> int:
     """Stand-alone entry (``python -m taichi_hair.io.cli``) until the main CLI wires ``register`` in."""
     import argparse
-    import sys
 
     p = argparse.ArgumentParser(prog="taichi-hair-io")
     register(p.add_subparsers(dest="command", required=True))

@@ -187,6 +187,8 @@ class Groom:
             return int(np.searchsorted(off, vertex, side="right") - 1)
 
         def check_finite(name, arr, per):
+            if np.isfinite(arr.reshape(-1)).all():  # one flat pass in the common case
+                return
             finite = np.isfinite(arr)
             if finite.ndim > 1:
                 finite = finite.reshape(finite.shape[0], -1).all(axis=1)
@@ -268,6 +270,20 @@ class Groom:
         if not isinstance(self.units, str):
             raise ValueError(f"Groom: field 'units' must be a string, got {self.units!r}")
         return self
+
+    def add_to_builder(self, builder, material=None, root: str = "clamped", body: int = 0) -> list[int]:
+        """Add every strand to a :class:`~taichi_hair.builder.GroomBuilder` (float64 polylines).
+
+        ``material`` is one RodMaterial (or dict) for all strands, or a callable
+        ``material(strand_index) -> RodMaterial``; the groom's lengths must be in metres.
+        Returns the builder's strand indices.  The builder's own checks apply
+        (at least 3 vertices, no repeated points) and name the builder's strand index.
+        """
+        out = []
+        for s in range(self.strand_count):
+            m = material(s) if callable(material) else material
+            out.append(builder.add_strand(self.strand(s).astype(np.float64), m, root=root, body=body))
+        return out
 
     # ------------------------------------------------------------------ misc
     def copy(self) -> "Groom":

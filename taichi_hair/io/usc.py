@@ -59,12 +59,11 @@ def walk_strands(data: bytes, path, floats_per_point: int):
     if h != nw:
         raise GroomFormatError(path, f"{4 * (nw - h)} bytes follow the last of {ns} strands; expected the file to "
                                      f"end there", offset=4 * h)
-    flat = np.frombuffer(data, dtype="<f4")
-    # Gather the point words (skipping the one-word strand headers) with one index array.
-    total = int(counts.sum())
-    idx = np.repeat(starts - np.concatenate([[0], np.cumsum(counts * stride)[:-1]]), counts * stride) \
-        + np.arange(total * stride)
-    pts = flat[idx].reshape(total, stride).astype(np.float32)
+    # Every word but the count and the strand headers is a coordinate: drop those with one mask.
+    keep = np.ones(nw, dtype=bool)
+    keep[0] = False
+    keep[starts - 1] = False
+    pts = np.frombuffer(data, dtype="<f4")[keep].reshape(-1, stride).astype(np.float32, copy=False)
     return pts, counts
 
 
