@@ -626,3 +626,15 @@ def test_ponytail_into_the_builder():
     b = GroomBuilder()
     idx = g.add_to_builder(b, RodMaterial(radius=4e-5))
     assert idx == list(range(255)) and b.strand_count == 255
+
+
+def test_written_files_get_normal_permissions(tmp_path):
+    g = random_groom(seed=15)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    save_groom(g, tmp_path / "new.hair")
+    assert (tmp_path / "new.hair").stat().st_mode & 0o777 == 0o666 & ~mask  # not mkstemp's 0600
+    (tmp_path / "kept.ply").write_bytes(b"x")
+    os.chmod(tmp_path / "kept.ply", 0o640)
+    save_groom(g, tmp_path / "kept.ply")
+    assert (tmp_path / "kept.ply").stat().st_mode & 0o777 == 0o640  # an existing file keeps its mode

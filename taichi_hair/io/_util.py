@@ -90,6 +90,12 @@ def _fdopen(fd: int):
     return os.fdopen(fd, "wb")
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)  # the only way to read it is to set it; put it straight back
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(path, suffix: str = ""):
     """Yield a temporary path in the target's directory; ``os.replace`` it onto ``path`` on success.
@@ -102,6 +108,12 @@ def atomic_path(path, suffix: str = ""):
     os.close(fd)
     try:
         yield tmp
+        # mkstemp creates the file 0600: give it the target's mode, or what open() would (0666 & ~umask).
+        try:
+            mode = os.stat(path).st_mode & 0o7777
+        except FileNotFoundError:
+            mode = 0o666 & ~_umask()
+        os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
