@@ -274,14 +274,14 @@ def region(**kw):
     return ShapeRegion(**base)
 
 
-CURLY = slice(0, 4)  # clamped curly strands (24 vertices), phases 0, 0, 1, 1
+CURLY = slice(0, 4)  # clamped curly strands (20 vertices, 25 cm), phases 0, 0, 1, 1
 FREE_CURLY = 4  # a free curly strand
 SHORT = slice(5, 8)  # clamped short curly strands (8 vertices)
 
 
 @pytest.fixture(scope="module")
 def curly_rig():
-    strands = [curly(24, origin=(0.03 * k, 0, 0), phase=k // 2) for k in range(4)]
+    strands = [curly(20, 0.25, pitch=0.06, origin=(0.05 * k, 0, 0), phase=k // 2) for k in range(4)]
     strands += [curly(12, pitch=0.03, origin=(0.15, 0, 0))]
     strands += [curly(8, 0.1, pitch=0.05, origin=(0.3 + 0.05 * k, 0, 0), phase=k) for k in range(3)]
     return Rig(strands, roots=["clamped"] * 4 + ["free"] + ["clamped"] * 3)
@@ -348,6 +348,52 @@ def test_methods_converge_to_the_same_shape_with_many_iterations(curly_rig):
     assert np.max(np.abs(results[2][300] - results[1][300])) < 1e-5
     # After one iteration the methods differ: Method 1's transforms are exact, Method 2's lag by one vertex.
     assert np.max(np.abs(results[2][1] - results[1][1])) > 1e-3
+
+
+@pytest.mark.parametrize("method", [1, 2, 3])
+def test_curly_strands_settle_under_gravity(curly_rig, method):
+    """Damped clamped strands come to rest: the transforms do not feed a self-sustained motion."""
+    rig = curly_rig
+    clamped = rig.vertices([0, 1, 2, 3, 5, 6, 7])
+    solver = rig.configure(method, [region(local_stiffness=0.8, damping=0.2)])
+    x = rig.run(solver, 600)
+    assert np.abs(rig.state.vertex_velocity.to_numpy()[clamped]).max() < 1e-3
+    assert np.abs(x[clamped] - rig.rest[clamped]).max() > 1e-2  # it did sag
+
+
+def _qmul(a, b):
+    v = a[3] * b[:3] + b[3] * a[:3] + np.cross(a[:3], b[:3])
+    return np.r_[v, a[3] * b[3] - a[:3] @ b[:3]]
+
+
+def _qrot(q, v):
+    t = 2 * np.cross(q[:3], v)
+    return v + q[3] * t + np.cross(q[:3], t)
+
+
+def test_jacobi_transforms_converge_to_the_serial_ones(curly_rig):
+    """Algorithm 4's transforms, iterated on fixed positions (S_L = 0), equal Algorithm 3's chain
+    ^wR_i = ^wR_{i-1} rot(e_x -> ^{i-1}x_i) of Eq. 1, computed here in NumPy."""
+    rig = curly_rig
+    x0 = rig.rest
+    deformed = x0 + np.c_[0.4 * (x0[:, 1] - x0[0, 1]), np.zeros(len(x0)), 2.0 * (x0[:, 1] - x0[0, 1]) ** 2]
+    fixed = rig.model.host["vertex_is_fixed"] == 1
+    deformed[fixed] = x0[fixed]
+    solver = rig.configure(2, [region(local_iterations=30, length_iterations=0, damping=1.0)], air_drag=0.0)
+    x = rig.run(solver, 1, gravity=(0.0, 0.0, 0.0), positions=deformed).astype(np.float64)
+    rot = solver.vertex_rotation.to_numpy().astype(np.float64)
+    rest = solver.vertex_rest_rotation.to_numpy().astype(np.float64)
+    start, count = rig.model.host["strand_vertex_start"][0], rig.model.host["strand_vertex_count"][0]
+    q = rest[start + 1]
+    for i in range(start + 2, start + count):
+        local_x = _qrot(q * [-1, -1, -1, 1], (x[i] - x[i - 1]) / np.linalg.norm(x[i] - x[i - 1]))
+        arc = np.r_[np.cross([1.0, 0.0, 0.0], local_x), 1.0 + local_x[0]]
+        q = _qmul(q, arc / np.linalg.norm(arc))
+        assert abs(abs(q @ rot[i]) - 1.0) < 1e-5, i  # same rotation (q and -q alike)
+    # And the rest transforms reproduce the rest shape: P_i^0 = P_{i-1}^0 + R_{i-1}^0 ^{i-1}P_i^0.
+    local = solver.vertex_rest_local_position.to_numpy().astype(np.float64)
+    for i in range(start + 1, start + count):
+        np.testing.assert_allclose(x0[i - 1] + _qrot(rest[i - 1], local[i]), x0[i], atol=1e-6)
 
 
 def test_edge_length_constraints_limit_stretch(straight_rig):
