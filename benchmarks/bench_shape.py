@@ -12,7 +12,8 @@ it reports the mean wall time of a step (after a warm-up; kernel compilation is
 reported apart) and a per-stage split from a second, profiled pass (profiling
 synchronises after each stage, so its total is a little higher).  As a quality
 proxy it also reports the RMS and largest distance of each method's vertices to
-Method 1's (the paper's reference) after the same nodding steps.
+Method 1's (the paper's reference) after the same nodding steps, and the mean
+and largest relative edge stretch at the end.
 
 Usage:
     python benchmarks/bench_shape.py [--arch cpu|cuda] [--sizes 20000x11,20000x64] [--methods 1,2,3]
@@ -112,6 +113,9 @@ def bench_size(th, ti, strands, vertices, methods, steps):
         x = state.positions().astype(np.float64)
         assert np.all(np.isfinite(x))
         finals[method] = x
+        real = model.host["edge_rest_length"] > 0
+        idx = np.where(real)[0]
+        stretch = np.linalg.norm(x[idx + 1] - x[idx], axis=1) / model.host["edge_rest_length"][idx] - 1.0
         # Quality proxy: distance to Method 1's result after the same 3 + 2 * steps nodding steps.
         diff = np.linalg.norm(x - finals[1], axis=1) if 1 in finals else None
         rows.append({"strands": model.strand_count, "vertices_per_strand": vertices, "vertices": model.vertex_count,
@@ -119,12 +123,15 @@ def bench_size(th, ti, strands, vertices, methods, steps):
                      "colliders": len(colliders), "steps_timed": steps, "ms_per_step": ms,
                      "compile_and_first_step_s": compile_s, "stage_ms_per_step": stage_ms,
                      "steps_run": 3 + 2 * steps,
+                     "edge_stretch_max": float(np.abs(stretch).max()),
+                     "edge_stretch_mean": float(np.abs(stretch).mean()),
                      "rms_distance_to_method1_mm": None if diff is None else 1e3 * float(np.sqrt(np.mean(diff**2))),
                      "max_distance_to_method1_mm": None if diff is None else 1e3 * float(diff.max())})
         stages = " ".join(f"{k}={v:.2f}" for k, v in stage_ms.items())
         dist = "" if diff is None else f"{1e3 * np.sqrt(np.mean(diff**2)):8.2f} {1e3 * diff.max():8.2f}"
         print(f"{strands:>7} x {vertices:<3} {model.vertex_count:>9} {method:>6} {ms:10.2f} {compile_s:10.2f} "
-              f"{dist:>17}  {stages}", flush=True)
+              f"{dist:>17} {100 * np.abs(stretch).mean():6.2f} {100 * np.abs(stretch).max():6.1f}  {stages}",
+              flush=True)
     return rows
 
 
@@ -160,7 +167,7 @@ def main(argv=None):
     print(f"SolverShape benchmark on {arch} ({os.cpu_count()} cores), taichi {version}, dt = 1/60 s, "
           f"{steps} timed steps")
     print(f"{'strands x verts':>15} {'vertices':>9} {'method':>6} {'ms/step':>10} {'compile s':>10} "
-          f"{'vs M1 rms/max mm':>17}  stage ms/step")
+          f"{'vs M1 rms/max mm':>17} {'str%':>6} {'max%':>6}  stage ms/step")
     for size in args.sizes.split(","):
         ns, nv = (int(v) for v in size.split("x"))
         out["results"].extend(bench_size(th, ti, ns, nv, methods, steps))

@@ -108,13 +108,24 @@ def quat_from_matrix(R) -> vec4:
 
 
 @ti.func
+def safe_normalized(v: vec3, fallback: vec3) -> vec3:
+    """v / |v|, or ``fallback`` when v is (nearly) zero: collapsed vertices must not make NaN frames."""
+    n = v.norm()
+    out = fallback
+    if n > 1e-12:
+        out = v / n
+    return out
+
+
+@ti.func
 def advance_frame(q_prev: vec4, x_prev: vec3, x_next: vec3) -> vec4:
     """Global rotation of frame i from frame i-1 (Eq. 1, Algorithm 2 l.7-9, Algorithm 3 l.10-12).
 
     ``^{i-1}x_i = R_{i-1}^T normalize(P_i - P_{i-1})``; the local transform ``^{i-1}R_i`` is the
     rotation from (1, 0, 0) to ``^{i-1}x_i``, and ``^wR_i = ^wR_{i-1} ^{i-1}R_i``.
     """
-    local_x = quat_rotate_inverse(q_prev, (x_next - x_prev).normalized())
+    e_x = vec3(1.0, 0.0, 0.0)
+    local_x = safe_normalized(quat_rotate_inverse(q_prev, x_next - x_prev), e_x)
     return quat_mul(q_prev, quat_between(vec3(1.0, 0.0, 0.0), local_x)).normalized()
 
 
@@ -220,7 +231,7 @@ def root_rotation(model: ti.template(), solver: ti.template(), x: ti.template(),
     else:
         q0 = solver.vertex_rest_rotation[a]
         rest_x = quat_rotate(q0, vec3(1.0, 0.0, 0.0))
-        cur_x = (x[a + 1] - x[a]).normalized()
+        cur_x = safe_normalized(x[a + 1] - x[a], rest_x)
         q = quat_mul(quat_between(rest_x, cur_x), q0).normalized()
     return q
 
@@ -309,7 +320,7 @@ def integrate(
             last = a + model.strand_vertex_count[s] - 1
             lo = ti.max(i - 1, a)
             hi = ti.min(i + 1, last)
-            t = (solver.vertex_position_begin[hi] - solver.vertex_position_begin[lo]).normalized()
+            t = safe_normalized(solver.vertex_position_begin[hi] - solver.vertex_position_begin[lo], vec3(0.0))
             v = solver.vertex_velocity_begin[i]
             rel = air_velocity - v
             accel = gravity + air_drag * (rel - rel.dot(t) * t)
