@@ -638,3 +638,25 @@ def test_written_files_get_normal_permissions(tmp_path):
     os.chmod(tmp_path / "kept.ply", 0o640)
     save_groom(g, tmp_path / "kept.ply")
     assert (tmp_path / "kept.ply").stat().st_mode & 0o777 == 0o640  # an existing file keeps its mode
+
+
+@pytest.mark.parametrize("fmt,opts,dtype", [("obj", {}, np.float32), ("obj", {}, np.float64),
+                                            ("ply", {"ascii": True}, np.float32), ("ply", {"ascii": True}, np.float64),
+                                            ("tfx", {"version": 2.0}, np.float32)], ids=str)
+def test_text_formats_exact_for_extreme_values(tmp_path, fmt, opts, dtype):
+    info = np.finfo(dtype)
+    # No subnormals: ti.init (the session fixture) turns on flush-to-zero for the whole process,
+    # so NumPy's text parsing returns 0 for them (binary formats copy their bits untouched).
+    special = np.array([info.max, -info.max, info.tiny, -info.tiny, -0.0, 0.1, 1 / 3, -2.5e-7,
+                        123456.789, np.nextafter(dtype(1), dtype(2))], dtype=dtype)
+    rng = np.random.default_rng(3)
+    vals = np.concatenate([special, (rng.normal(size=200) * 10.0 ** rng.integers(-30, 30, 200)).astype(dtype)])
+    assert np.all((vals == 0) | (np.abs(vals) >= info.tiny))
+    vals = vals[: len(vals) // 6 * 6]
+    g = Groom(points=vals.reshape(-1, 3), strand_offsets=np.arange(0, len(vals) // 3 + 1, 2)).validate()
+    p = tmp_path / f"x{EXT[fmt]}"
+    save_groom(g, p, **opts)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        h = load_groom(p, **({"dtype": dtype} if fmt == "obj" else {}))
+    assert_same_points(g, h)

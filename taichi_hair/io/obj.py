@@ -3,16 +3,16 @@
 Indices are 1-based; negative indices count back from the last vertex defined
 so far.  ``l`` entries of the form ``v/vt`` use the vertex index.  Other records
 (``vn``, ``vt``, ``f``, ``o``, ``g``, ``usemtl``...) are ignored.  Points are
-read as float32 (``dtype=np.float64`` to keep more); the writer writes each
-value's shortest round-trip text for its dtype, so float32 grooms round-trip
-bit for bit.
+read as float32 (``dtype=np.float64`` to keep more); the writer writes 9
+significant digits for float32 and 17 for float64, enough for every value to
+read back bit for bit.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._util import atomic_open, finish, offsets_from_counts, prepare_write, read_bytes
+from ._util import atomic_open, finish, float_format, offsets_from_counts, prepare_write, read_bytes, text_rows
 from .errors import GroomFormatError
 from .groom import Groom
 
@@ -84,11 +84,11 @@ def read_obj(path, dtype=np.float32) -> Groom:
 
 def write_obj(groom: Groom, path) -> None:
     g = prepare_write(groom, "write_obj")
-    txt = g.points.astype(str)  # each value's shortest round-trip text in its own dtype
-    idx = (np.arange(g.vertex_count) + 1).astype(str)
+    f = float_format(g.points.dtype)
     with atomic_open(path) as fh:
         fh.write(f"# taichi-hair: {g.strand_count} strands, {g.vertex_count} vertices\n".encode("ascii"))
-        fh.write(("v " + "\nv ".join(map(" ".join, txt.tolist())) + "\n").encode("ascii"))
-        off = g.strand_offsets
-        lines = ["l " + " ".join(idx[off[s]:off[s + 1]].tolist()) for s in range(g.strand_count)]
+        fh.write(text_rows([g.points[:, 0], g.points[:, 1], g.points[:, 2]], [f, f, f], prefix="v ").encode("ascii"))
+        idx = [str(i) for i in range(1, g.vertex_count + 1)]
+        off = g.strand_offsets.tolist()
+        lines = ["l " + " ".join(idx[off[s]:off[s + 1]]) for s in range(g.strand_count)]
         fh.write(("\n".join(lines) + "\n").encode("ascii"))

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._util import ByteReader, atomic_open, finish, offsets_from_counts, prepare_write, read_bytes
+from ._util import (ByteReader, atomic_open, finish, float_format, offsets_from_counts, prepare_write, read_bytes,
+                    text_rows)
 from .errors import GroomFormatError
 from .groom import Groom
 
@@ -350,15 +351,11 @@ def write_ply(groom: Groom, path, ascii: bool = False) -> None:
         fh.write(("\n".join(head) + "\n").encode("ascii"))
         for props, cols in ((vprops, vcols), (sprops, scols)):
             if ascii:
-                # astype(str) gives each value's shortest round-trip text in its own dtype.
-                txt = np.stack([np.asarray(c).astype(t).astype(str) for (_, t), c in zip(props, cols)], axis=1)
-                fh.write(_join_rows(txt).encode("ascii"))
+                fmts = [float_format(t) if t[-2] == "f" else "%d" for _, t in props]
+                fh.write(text_rows([np.asarray(c).astype(t) for (_, t), c in zip(props, cols)], fmts).encode("ascii"))
             else:
                 rec = np.empty(len(cols[0]), dtype=np.dtype(props))
                 for (nm, _), c in zip(props, cols):
                     rec[nm] = c
                 fh.write(rec.tobytes())
 
-
-def _join_rows(txt: np.ndarray) -> str:
-    return "\n".join(map(" ".join, txt.tolist())) + "\n"

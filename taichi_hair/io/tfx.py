@@ -32,7 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._util import ByteReader, atomic_open, check_count, finish, offsets_from_counts, prepare_write, read_bytes
+from ._util import (ByteReader, atomic_open, check_count, finish, offsets_from_counts, prepare_write, read_bytes,
+                    text_rows)
 from .errors import GroomFormatError
 from .groom import Groom
 
@@ -229,8 +230,8 @@ def write_tfx(groom: Groom, path, version: float = 4.0) -> None:
             fh.write(pts.tobytes())
         elif version == 2.0:
             out = ["version 2.0", f"numStrands {ns}", "is sorted 1"]
-            txt = g.points.astype(np.float32).astype(str)
-            rows = list(map(" ".join, txt.tolist()))
+            p32 = g.points.astype(np.float32)
+            rows = text_rows([p32[:, 0], p32[:, 1], p32[:, 2]], ["%.9g"] * 3).splitlines()
             for s in range(ns):
                 a, b = int(g.strand_offsets[s]), int(g.strand_offsets[s + 1])
                 out.append(f"strand {s} numVerts {b - a} texcoord 0.0 0.0")
