@@ -77,10 +77,12 @@ def main(argv=None) -> int:
     p.add_argument("--tmp", default=None, help="folder for the files (default: a fresh temporary folder)")
     args = p.parse_args(argv)
     try:
-        import pxr  # noqa: F401
-        have_usd = True
+        from pxr import Usd
+
+        usd_version = ".".join(str(v) for v in Usd.GetVersion())
     except ImportError:
-        have_usd = False
+        usd_version = None
+    have_usd = usd_version is not None
     groom = make_groom(args.strands, args.vertices)
     tmp = tempfile.mkdtemp(prefix="bench_io_", dir=args.tmp)
     rows = []
@@ -128,7 +130,7 @@ def main(argv=None) -> int:
               f"{r['save_strands_s']:14.3g} {r['load_ms']:9.1f} {r['load_mb_s']:9.1f} {r['load_strands_s']:14.3g} "
               f"{str(r['bit_exact']):>5}")
     result = dict(benchmark="io", strands=args.strands, vertices_per_strand=args.vertices,
-                  repeat=args.repeat, python=platform.python_version(), numpy=np.__version__,
+                  repeat=args.repeat, python=platform.python_version(), numpy=np.__version__, usd_core=usd_version,
                   machine=platform.machine(), processor=platform.processor(), cpu_count=os.cpu_count(),
                   time=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), rows=rows)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)

@@ -660,3 +660,21 @@ def test_text_formats_exact_for_extreme_values(tmp_path, fmt, opts, dtype):
         warnings.simplefilter("ignore")
         h = load_groom(p, **({"dtype": dtype} if fmt == "obj" else {}))
     assert_same_points(g, h)
+
+
+def test_missing_usd_core_gives_a_clear_error(tmp_path, monkeypatch):
+    import sys
+
+    for name in [m for m in sys.modules if m == "pxr" or m.startswith("pxr.")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, "pxr", None)  # "import pxr" now raises ImportError
+    g = random_groom(seed=16)
+    with pytest.raises(ImportError, match="pip install usd-core"):
+        save_groom(g, tmp_path / "x.usda")
+    assert not (tmp_path / "x.usda").exists()
+    (tmp_path / "y.usda").write_text("#usda 1.0\n")
+    with pytest.raises(ImportError, match="usd-core"):
+        load_groom(tmp_path / "y.usda")
+    args = _parser().parse_args(["info", str(tmp_path / "y.usda")])
+    with pytest.raises(ValueError, match="usd-core"):  # the CLI turns it into a one-line error
+        args.func(args)
