@@ -340,6 +340,14 @@ def test_ply_hand_made_ascii_with_colours_and_edges(tmp_path):
     p.write_bytes(head + pts.tobytes() + bytes([3]) + np.array([0, 1, 2], ">i4").tobytes()
                   + np.array([2], ">i4").tobytes())
     np.testing.assert_array_equal(load_groom(p).points, pts.astype(np.float32))
+    # hairutil's layout: per-vertex "thickness" (a diameter) and a strand element "nsegs".
+    (tmp_path / "hu.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
+        "property float thickness\nelement strand 2\nproperty ushort nsegs\nend_header\n"
+        "0 0 0 0.5\n0 1 0 0.5\n0 2 0 0.5\n1 0 0 0.5\n1 1 0 0.5\n2\n1\n")
+    g = load_groom(tmp_path / "hu.ply")
+    np.testing.assert_array_equal(g.radius, [0.25] * 5)
+    np.testing.assert_array_equal(g.strand_offsets, [0, 3, 5])
     p.write_text(text.replace("element strand 2", "element strand 3"))
     with pytest.raises(GroomFormatError, match=r"h\.ply"):
         load_groom(p)

@@ -4,8 +4,9 @@ The reader follows the header's element and property lists instead of assuming
 them.  Recognised content:
 
 - ``element vertex N``: ``x y z`` (float or double; the dtype is kept),
-  optional ``rest_x rest_y rest_z`` (rest pose), ``radius`` or ``width``
-  (diameter), ``red green blue`` (uchar /255, or float as is), ``pinned``.
+  optional ``rest_x rest_y rest_z`` (rest pose), ``radius``, or ``width`` /
+  ``thickness`` (diameters), ``red green blue`` (uchar /255, or float as is),
+  ``pinned``.
 - ``element strand S``: a count, read as a segment count (strand i owns
   segments + 1 consecutive vertices) unless named like a vertex count
   (``vertex_count``, ``num_vertices``, ``nverts``...); optional ``radius``,
@@ -266,8 +267,9 @@ def read_ply(path) -> Groom:
     radius = None
     if "radius" in v:
         radius = v["radius"].astype(np.float32 if v["radius"].dtype != np.float64 else np.float64)
-    elif "width" in v:
-        radius = v["width"].astype(np.float64 if v["width"].dtype == np.float64 else np.float32) * 0.5
+    elif "width" in v or "thickness" in v:  # diameters (hairutil and the HAIR format use "thickness")
+        d = v["width" if "width" in v else "thickness"]
+        radius = d.astype(np.float64 if d.dtype == np.float64 else np.float32) * 0.5
     elif st is not None and "radius" in st:
         radius = np.asarray(st["radius"], dtype=np.float64 if st["radius"].dtype == np.float64 else np.float32)
     color = None
