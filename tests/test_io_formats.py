@@ -613,6 +613,9 @@ def test_cli_bad_file_raises_format_error(tmp_path):
         args.func(args)
     from taichi_hair.io.cli import main
     assert main(["info", str(bad)]) == 2
+    args = _parser().parse_args(["convert", str(bad), str(tmp_path / "out.xyz")])
+    with pytest.raises(ValueError, match="pass --to"):
+        args.func(args)
 
 
 def test_cli_prints_the_unit_warning_as_one_line(tmp_path, capsys):

@@ -17,7 +17,7 @@ import warnings
 
 import numpy as np
 
-from . import FORMAT_NAMES, WRITERS, load_groom, save_groom
+from . import FORMAT_NAMES, WRITERS, format_from_extension, load_groom, save_groom
 from .groom import Groom
 
 
@@ -128,6 +128,9 @@ def _load(path, fmt, scale) -> Groom:
 
 
 def cmd_convert(args) -> int:
+    if args.to_format is None and format_from_extension(args.output) not in WRITERS:
+        raise ValueError(f"cannot tell the output format from {args.output!r}; pass --to, one of "
+                         f"{', '.join(WRITERS)}")
     groom = _load(args.input, args.from_format, args.scale)
     options = {}
     if args.ascii:
