@@ -584,3 +584,21 @@ def test_non_finite_values_stop_the_step_and_restore_the_state(straight_rig):
         solver.step(st, ctl, DT)
     assert err.value.strand == 7 and err.value.field == "vertex_position"
     assert np.array_equal(st.positions(), before)
+
+
+def test_step_allocates_no_fields(curly_rig, monkeypatch):
+    """Every field is created in the constructor (STYLE habit 1)."""
+    rig = curly_rig
+    solvers = [rig.configure(m, [ShapeRegion()], colliders=[ShapeSphereCollider((0.0, -0.3, 0.0), 0.05)])
+               for m in (1, 2, 3)]
+    st, ctl = rig.reset()
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a Taichi field was allocated inside step()")
+
+    monkeypatch.setattr(ti, "field", forbidden)
+    monkeypatch.setattr(ti.Vector, "field", forbidden)
+    monkeypatch.setattr(ti.Matrix, "field", forbidden)
+    for solver in solvers:
+        for _ in range(3):
+            solver.step(st, ctl, DT)
