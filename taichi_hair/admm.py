@@ -1,4 +1,4 @@
-"""ADMM stage kernels of Algorithm 1 (Daviet 2023), contacts excepted.
+"""ADMM stage kernels of Algorithm 1 (Daviet 2023); the contact stages live in contacts.py and projection.py.
 
 Each kernel is one stage; ``solver_admm.SolverADMM.step`` sequences them
 (the "stage" schedule).  The per-index body of each stage is a ``ti.func``
@@ -190,6 +190,10 @@ def assemble_position_at(
         if edge.edge_rest_length[i] > 0.0:
             r_next = buf.pair_force[i + 1]
             f -= vec3(r_next[0], r_next[1], r_next[2])
+        # Collision constraint (Sec. 4.5): W_z on the diagonal, W_z (lambda_z + z - x) in f; zero without contact.
+        w_z = buf.vertex_contact_weight[i]
+        diag += w_z
+        f += w_z * (buf.vertex_contact_target[i] - x[i])
         buf.tri_lower[i] = lower
         buf.tri_diag[i] = diag
         buf.tri_upper[i] = upper
@@ -211,7 +215,7 @@ def assemble_position_system(
 ):
     """Assemble M_hat dx = f_hat of Eq. (3); the same tridiagonal matrix serves the three axes.
 
-    M = d2E_e/dx2 + W_z + B^T W_y B, f = -dE_e/dx + W_z (...) + B^T W_y (lambda_y + y - Bx).
+    M = d2E_e/dx2 + W_z + B^T W_y B, f = -dE_e/dx + W_z (lambda_z + z - x) + B^T W_y (lambda_y + y - Bx).
     B^T W_y B is an edge Laplacian whose edge weight is the sum of the weights
     of the (one or two) pairs containing the edge.  Kinematic vertices get an
     identity row and no coupling (the projections Pi_A of Eq. 3).

@@ -86,6 +86,56 @@ SCHEDULES = ("auto", "stage", "strand")
 
 
 @dataclass
+class ContactConfig:
+    """Frictional contacts of :class:`SolverADMM` (Daviet 2023, Sec. 4.5).
+
+    Attributes:
+        hair_hair: detect and resolve hair-hair contacts (body colliders are
+            always resolved when the solver has any).
+        friction: hair-hair Coulomb coefficient mu [-].
+        margin: proximity margin added to the contact distance r_a + r_b at
+            detection [m].  Pairs within reach at the beginning of the step
+            become contacts (inactive while apart: the Signorini condition
+            only acts when the gap would close).
+        velocity_margin: in the dynamic mode the margin also grows by this
+            factor times the largest approach within a step,
+            2 |v|max dt + |g| dt^2 [-], so fast hair does not tunnel between
+            detections (proximity detection runs once per step).
+        max_contacts_per_edge: keep only the closest contacts of each edge
+            (6 in the paper) [-].
+        projection_iterations: Gauss-Seidel sweeps over the 8 batches per
+            ADMM iteration (2 in the paper's hairball) [-].
+        correction_iterations: sweeps of the final geometric correction on x
+            (10 in the paper's hairball; 0 disables it) [-].
+        capacity_per_vertex: initial contact buffer size per vertex; grown
+            (doubled, and the detection redone) when a step overflows it [-].
+    """
+
+    hair_hair: bool = True
+    friction: float = 0.2
+    margin: float = 1.0e-4
+    velocity_margin: float = 1.0
+    max_contacts_per_edge: int = 6
+    projection_iterations: int = 2
+    correction_iterations: int = 10
+    capacity_per_vertex: float = 2.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.friction) and self.friction >= 0):
+            raise ValueError(f"ContactConfig.friction must be a finite number >= 0, got {self.friction!r}")
+        for name in ("margin", "velocity_margin"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"ContactConfig.{name} must be a finite number >= 0, got {v!r}")
+        for name, lo in (("max_contacts_per_edge", 1), ("projection_iterations", 1), ("correction_iterations", 0)):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= lo):
+                raise ValueError(f"ContactConfig.{name} must be an integer >= {lo}, got {v!r}")
+        if not (math.isfinite(self.capacity_per_vertex) and self.capacity_per_vertex > 0):
+            raise ValueError(f"ContactConfig.capacity_per_vertex must be > 0, got {self.capacity_per_vertex!r}")
+
+
+@dataclass
 class SolverADMMConfig:
     """Settings of :class:`taichi_hair.SolverADMM` (Daviet 2023, Sec. 4).
 
@@ -128,6 +178,9 @@ class SolverADMMConfig:
             (and ``"stage"`` when ``tridiagonal="pcr"`` is asked for).
         check_finite: after each step, check every state value for NaN/inf
             and raise :class:`SimulationDivergedError` naming the strand.
+        contacts: :class:`ContactConfig` to enable frictional contacts
+            (Sec. 4.5), or ``None`` (no hair-hair contacts; body colliders
+            given to the solver still use the default ContactConfig).
     """
 
     iterations: int = 10
@@ -141,8 +194,13 @@ class SolverADMMConfig:
     tridiagonal: str = "auto"
     schedule: str = "auto"
     check_finite: bool = True
+    contacts: ContactConfig | None = None
 
     def __post_init__(self):
+        if isinstance(self.contacts, dict):
+            self.contacts = ContactConfig(**self.contacts)
+        if self.contacts is not None and not isinstance(self.contacts, ContactConfig):
+            raise ValueError(f"SolverADMMConfig.contacts must be a ContactConfig or None, got {self.contacts!r}")
         if not (isinstance(self.iterations, int) and self.iterations >= 1):
             raise ValueError(f"SolverADMMConfig.iterations must be an integer >= 1, got {self.iterations!r}")
         if self.mode not in MODES:

@@ -161,3 +161,101 @@ class SolverBuffers:
         self.tri_rhs3 = ti.field(vec3, n)
         #: Right-hand side then solution of the twist system [J -> rad].
         self.tri_rhs1 = ti.field(float, n)
+        #: Collision weight W_z,i of the current iteration, 0 without contact (Sec. 4.5) [N/m].
+        self.vertex_contact_weight = ti.field(float, n)
+        #: lambda_z + z, the collision target of the global step: f += W_z (lambda_z + z - x) [m].
+        self.vertex_contact_target = ti.field(vec3, n)
+
+
+# --------------------------------------------------------------------------- contacts (Sec. 4.5)
+ivec4 = ti.types.vector(4, ti.i32)
+vec4 = ti.types.vector(4, float)
+vec9 = ti.types.vector(9, float)
+
+
+class ContactFields:
+    """Contact buffers, sized up front (``capacity`` contacts); overflow is detected and grows them.
+
+    A contact c couples up to four vertices I_c (two per edge for hair-hair,
+    one for a body contact) with weights h_{c,i}: the relative position is
+    u = sum_i h_{c,i} x_i + u_kin (Sec. 4.5), normal component >= 0 when apart.
+    """
+
+    def __init__(self, capacity: int, vertex_count: int):
+        self.capacity = capacity
+        c, n = capacity, vertex_count
+        #: Number of contacts detected at the last detection; may exceed capacity (overflow) [-], shape ().
+        self.contact_count = ti.field(ti.i32, ())
+        #: Vertices I_c of each contact, -1 where unused [-], shape (capacity,).
+        self.contact_vertex = ti.field(ivec4, c)
+        #: Weights h_{c,i} (negative on the second edge of a hair-hair contact) [-], shape (capacity,).
+        self.contact_weight = ti.field(vec4, c)
+        #: Unit contact normal n_c, pointing from the second side to the first [-], shape (capacity,).
+        self.contact_normal = ti.field(vec3, c)
+        #: Kinematic term u_kin, so that u = H x + u_kin [m], shape (capacity,).
+        self.contact_kinematic = ti.field(vec3, c)
+        #: Coulomb friction coefficient mu_c [-], shape (capacity,).
+        self.contact_friction = ti.field(float, c)
+        #: Mass-split Delassus diagonal D_hat_c = sum_i n_i h_{c,i}^2 / W_z,i [m/N], shape (capacity,).
+        self.contact_delassus = ti.field(float, c)
+        #: Accumulated correction r_tilde_c = D_hat_c r_c (Sec. 4.5, footnote 3) [m], shape (capacity,).
+        self.contact_accumulated = ti.field(vec3, c)
+        #: Correction Delta u_c of the current batch [m], shape (capacity,).
+        self.contact_delta = ti.field(vec3, c)
+        #: Collider index for a body contact, -1 for hair-hair [-], shape (capacity,).
+        self.contact_collider = ti.field(ti.i32, c)
+        #: Last local solve: 0 separating, 1 sticking, 2 sliding [-], shape (capacity,).
+        self.contact_status = ti.field(ti.i32, c)
+        #: Number of contacts n_i touching vertex i [-], shape (vertex_count,).
+        self.vertex_contact_count = ti.field(ti.i32, n)
+        #: CSR of the contacts of each vertex, sorted by contact index: start [-], shape (vertex_count + 1,).
+        self.vertex_contact_start = ti.field(ti.i32, n + 1)
+        #: CSR entries (contact indices) [-], shape (4 * capacity,).
+        self.vertex_contact_list = ti.field(ti.i32, 4 * c)
+        #: Compact list of the vertices with at least one contact [-], shape (vertex_count,), and its length, shape ().
+        self.active_vertex = ti.field(ti.i32, n)
+        self.active_vertex_count = ti.field(ti.i32, ())
+        #: 1 / W_z,i (0 for kinematic vertices or vertices without contact) [m/N], shape (vertex_count,).
+        self.vertex_contact_inv_weight = ti.field(float, n)
+        #: Auxiliary positions z of the feasible projection [m], shape (vertex_count,).
+        self.vertex_z = ti.field(vec3, n)
+        #: Scaled collision dual lambda_z [m], shape (vertex_count,).
+        self.vertex_contact_dual = ti.field(vec3, n)
+
+
+class GridFields:
+    """Broad phase: a spatial hash of edge midpoints (counting sort) and per-edge 18-DOPs and candidates.
+
+    ``table_size`` buckets (a power of two); every field of shape (vertex_count,) is indexed by edge.
+    """
+
+    def __init__(self, vertex_count: int, table_size: int, candidates_per_edge: int):
+        n, t, k = vertex_count, table_size, candidates_per_edge
+        self.table_size = t
+        self.candidates_per_edge = k
+        #: Edges per bucket [-], shape (table_size,); start of each bucket in grid_entry, shape (table_size + 1,).
+        self.grid_cell_count = ti.field(ti.i32, t)
+        self.grid_cell_start = ti.field(ti.i32, t + 1)
+        #: Fill cursor per bucket [-], shape (table_size,).
+        self.grid_cell_cursor = ti.field(ti.i32, t)
+        #: Edge indices sorted by bucket [-], shape (vertex_count,).
+        self.grid_entry = ti.field(ti.i32, n)
+        #: Bucket of each edge, -1 for ghost edges [-].
+        self.edge_bucket = ti.field(ti.i32, n)
+        #: 18-DOP of each edge in 12 floats: centre [m] and half-extents along the 9 DOP axes
+        #: (x, y, z, x+-y, x+-z, y+-z, unnormalised) [m].
+        self.edge_dop_center = ti.field(vec3, n)
+        self.edge_dop_extent = ti.field(vec9, n)
+        #: The closest colliding edges of each edge, sorted by distance: other edge [-] and distance [m],
+        #: shape (vertex_count, candidates_per_edge); and their number, shape (vertex_count,).
+        self.edge_candidate = ti.field(ti.i32, (n, k))
+        self.edge_candidate_distance = ti.field(float, (n, k))
+        self.edge_candidate_count = ti.field(ti.i32, n)
+        #: Contacts emitted by each edge, then their exclusive prefix sum [-], shape (vertex_count + 1,).
+        self.edge_emit_count = ti.field(ti.i32, n + 1)
+        #: Body contacts emitted by each vertex, then their prefix sum [-], shape (vertex_count + 1,).
+        self.vertex_body_emit_count = ti.field(ti.i32, n + 1)
+        #: Scalars: cell size [m], detection margin [m], largest edge length [m], largest speed [m/s].
+        self.cell_size = ti.field(float, ())
+        self.max_edge_length = ti.field(float, ())
+        self.max_speed = ti.field(float, ())

@@ -2,18 +2,24 @@
 
 Per step (Sec. 4.2):
 
-1. collision detection                       -- Sec. 4.5 (contacts issue; slot kept)
+1. collision detection                       -- ``contacts.ContactPipeline.detect`` (grid.py, contacts.py; Sec. 4.5)
 2. advect the initial guess x <- x^t + dt v  -- ``admm.begin_step``
 3. update DER frames                         -- ``frames.update_reference_frames``
 4. for each ADMM iteration:
    a. local elasticity solve -> y           -- ``elasticity.solve_local_elasticity`` (Sec. 4.4)
-   b. feasible projection -> z              -- Sec. 4.5 (contacts issue; slot kept)
-   c. lambda_y <- lambda_y + y - Bx         -- fused into the local step (y - Bx is its increment)
+   b. feasible projection -> z              -- ``ContactPipeline.project`` (projection.py; Sec. 4.5, Eq. 5-6)
+   c. lambda_y <- lambda_y + y - Bx         -- fused into the local step (y - Bx is its increment);
+      lambda_z <- lambda_z + z - x          -- ``projection.update_contact_duals``
    d. tridiagonal solve M dx = f            -- ``admm.assemble_position_system`` + ``tridiag`` (Sec. 4.3, Eq. 3)
    e. x <- x + dx, update frames
    f. twist Newton step d2E/dth2 dth = -dE/dth -- ``admm.compute_pair_twist_terms`` + ``assemble_twist_system``
    g. theta <- theta + dth, update frames
-5. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
+5. optional geometric contact correction     -- ``ContactPipeline.correct`` (projection on x itself)
+6. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
+
+With contacts the strand schedule runs one iteration per launch, the z-step
+between launches (it couples strands); y and z both depend on x only, so
+projecting before the local step of the same iteration is the same algorithm.
 
 Step 4 has two schedules (``SolverADMMConfig.schedule``): "stage" launches
 the kernels above once per iteration, each parallel over all vertices (GPU);
@@ -46,7 +52,7 @@ from .tridiag import TridiagonalSolver
 #: Profiled stages.  The stage schedule fills local/global/frames/twist; the strand
 #: schedule records its fused ADMM loop under "iterations" (and the frame update
 #: before the loop under "frames").
-STAGES = ("begin", "local", "global", "frames", "twist", "iterations", "end")
+STAGES = ("detection", "begin", "local", "projection", "global", "frames", "twist", "iterations", "correction", "end")
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
@@ -61,7 +67,8 @@ class SolverADMM:
             times in ``stage_seconds`` (slower; for benchmarks).
     """
 
-    def __init__(self, model: Model, config: SolverADMMConfig | None = None, profile: bool = False):
+    def __init__(self, model: Model, config: SolverADMMConfig | None = None, profile: bool = False,
+                 colliders=None):
         self.model = model
         self.config = config or SolverADMMConfig()
         cfg = self.config
@@ -100,6 +107,19 @@ class SolverADMM:
         self.tridiagonal_method = method
         self.tridiag = TridiagonalSolver(model.strand_vertex_start, model.strand_vertex_count, model.vertex_strand,
                                          h["strand_vertex_count"], method)
+        #: Contacts (Sec. 4.5): hair-hair when config.contacts is set, bodies when colliders are given.
+        self.contacts = None
+        if cfg.contacts is not None or colliders:
+            from .colliders import ColliderSet
+            from .config import ContactConfig
+            from .contacts import ContactPipeline
+
+            ccfg = cfg.contacts if cfg.contacts is not None else ContactConfig(hair_hair=False)
+            if colliders is not None and not isinstance(colliders, ColliderSet):
+                colliders = ColliderSet(colliders, model.body_count)
+            self.contacts = ContactPipeline(model, ccfg, colliders)
+        #: Statistics of the last step's contacts (see ``ContactPipeline.statistics``).
+        self.contact_stats = {}
         self.profile = profile
         self.stage_seconds = {k: 0.0 for k in STAGES}
         self.step_count = 0
@@ -163,6 +183,13 @@ class SolverADMM:
         v_air = ti.math.vec3(*control.air_velocity)
 
         t0 = self._tick()
+        con = self.contacts
+        if con is not None:
+            # Proximity detection on x^t (Alg. 1 l.1); clear last step's collision weights first.
+            con.clear(b)
+            con.colliders.begin_step(control)
+            con.detect(state, dt, control.gravity, dyn)
+            t0 = self._tock("detection", t0)
         # Begin-of-step strains for strain-rate damping (Sec. 4.4), then advect (Alg. 1 l.2).
         admm.compute_strains(self.measure, m, m, state.vertex_position, state.edge_twist, state,
                              b.pair_kappa_begin, b.edge_strain_begin)
@@ -173,20 +200,39 @@ class SolverADMM:
         update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist, state)
         t0 = self._tock("frames", t0)
 
-        if self.schedule == "strand":
+        if self.schedule == "strand" and con is None:
             # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
             admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, m, control.body_rotation,
                                    state.vertex_position, state.edge_twist, state, b, g, v_air, cfg.air_viscosity,
                                    dt, damping_scale, cfg.iterations)
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
+        elif self.schedule == "strand":
+            for _ in range(cfg.iterations):
+                # (b, c) z-step and lambda_z update, then (a, c-g) one iteration strand by strand.
+                con.project(state.vertex_position, b, con.config.projection_iterations)
+                t0 = self._tock("projection", t0)
+                admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, m, control.body_rotation,
+                                       state.vertex_position, state.edge_twist, state, b, g, v_air,
+                                       cfg.air_viscosity, dt, damping_scale, 1)
+                t0 = self._tock("iterations", t0)
+                self.iteration_count += 1
         else:
             t0 = self._iterations_stage(state, control, dt, g, v_air, damping_scale, t0)
 
+        if con is not None:
+            con.count_status(state.vertex_position)
+        if con is not None and con.config.correction_iterations > 0:
+            con.correct(state.vertex_position, con.config.correction_iterations)
+            update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
+                                    state.edge_twist, state)
+            t0 = self._tock("correction", t0)
         admm.end_step(dyn, state, state, b, dt)
         self.step_count += 1
         if cfg.check_finite:
             self.check_finite(state)
+        if con is not None:
+            self.contact_stats = con.statistics(state.vertex_position)
         self._tock("end", t0)
 
     def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
@@ -199,7 +245,10 @@ class SolverADMM:
             solve_local_elasticity(self.measure, self.use_q, m, m, m, m, control.body_rotation,
                                    state.vertex_position, state.edge_twist, state, b, damping_scale)
             t0 = self._tock("local", t0)
-            # (b) Feasible projection over z (Sec. 4.5) goes here once contacts exist.
+            # (b) Feasible projection over z (Sec. 4.5) and lambda_z += z - x.
+            if self.contacts is not None:
+                self.contacts.project(state.vertex_position, b, self.contacts.config.projection_iterations)
+                t0 = self._tock("projection", t0)
             # (c) The dual update lambda_y += y - Bx is fused into the local step.
             # (d, e) Global tridiagonal solve over x (Sec. 4.3), then frames.
             admm.assemble_position_system(dyn, m, m, m, state.vertex_position, b, g, v_air, cfg.air_viscosity, dt)

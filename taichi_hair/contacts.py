@@ -1,0 +1,361 @@
+"""Narrow phase and contact buffers (Daviet 2023, Sec. 4.5), run once at the beginning of a step.
+
+From the per-edge candidate lists of :mod:`taichi_hair.grid` and the body
+colliders of :mod:`taichi_hair.colliders`, build the contact list:
+
+* hair-hair: the pair (a, b) is a contact when b is among the 6 closest of a
+  or a among the 6 closest of b (the paper discards a contact "not among the 6
+  closest ones for any of the colliding edges"); it is emitted once, by the
+  lower edge index when both lists hold it.  Closest points
+  p_a = (1-s) x_a + s x_{a+1} and p_b = (1-t) x_b + t x_{b+1} give weights
+  h = (1-s, s, -(1-t), -t), normal n = (p_a - p_b)/|p_a - p_b|, contact
+  thickness r = r_a + r_b and u_kin = -r n, so that u = H x + u_kin has normal
+  component n . (p_a - p_b) - r (the gap, with the begin-of-step normal) and
+  tangential component the relative slip since the beginning of the step.
+* body: each free vertex within r + margin of a collider (at the
+  begin-of-step body transform) gets a contact with h = 1 against the body
+  surface point s, carried rigidly to the end-of-step transform:
+  u = x - s_end - r n_end.
+
+Then the vertex-to-contact adjacency (CSR, each list sorted so the projection
+sums in a fixed order: bitwise determinism), the collision weights
+W_z,i = m_i / dt~_i^2 on vertices with contacts (zero elsewhere; dt~ of
+Sec. 4.5 from dimensional analysis, per strand), and the mass-split Delassus
+diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i.
+
+Emission writes contact c only when c < capacity; the count is always exact,
+so the caller detects an overflow, grows the buffers and detects again: no
+contact is ever dropped silently.
+"""
+
+import taichi as ti
+
+from .colliders import body_transform, collider_distance
+from .grid import segment_closest_points
+
+vec3 = ti.math.vec3
+ivec4 = ti.types.vector(4, ti.i32)
+vec4 = ti.types.vector(4, float)
+
+
+@ti.func
+def _in_list(grid: ti.template(), a: ti.i32, b: ti.i32) -> bool:
+    found = False
+    for k in range(grid.edge_candidate_count[a]):
+        if grid.edge_candidate[a, k] == b:
+            found = True
+    return found
+
+
+@ti.func
+def _emits(grid: ti.template(), a: ti.i32, k: ti.i32) -> bool:
+    b = grid.edge_candidate[a, k]
+    return a < b or not _in_list(grid, b, a)
+
+
+@ti.kernel
+def count_contacts(vertex: ti.template(), x: ti.template(), radius: ti.template(), grid: ti.template(),
+                   cs: ti.template(), margin: float):
+    """Per edge: hair-hair contacts it emits; per vertex: body contacts.  Then both prefix sums."""
+    for a in x:
+        c = 0
+        for k in range(grid.edge_candidate_count[a]):
+            if _emits(grid, a, k):
+                c += 1
+        grid.edge_emit_count[a] = c
+        nb = 0
+        if vertex.vertex_is_fixed[a] == 0:
+            for k in range(cs.count_field[None]):
+                R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[k])
+                d, n = collider_distance(cs, k, R.transpose() @ (x[a] - T))
+                if d < radius[a] + margin:
+                    nb += 1
+        grid.vertex_body_emit_count[a] = nb
+    # Exclusive prefix sums in place (serial; one pass over the vertices); entry n gets the total.
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        n = x.shape[0]
+        run_e = 0
+        run_b = 0
+        for i in range(n):
+            ce = grid.edge_emit_count[i]
+            cb = grid.vertex_body_emit_count[i]
+            grid.edge_emit_count[i] = run_e
+            grid.vertex_body_emit_count[i] = run_b
+            run_e += ce
+            run_b += cb
+        grid.edge_emit_count[n] = run_e
+        grid.vertex_body_emit_count[n] = run_b
+
+
+@ti.kernel
+def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(), radius: ti.template(),
+                   grid: ti.template(), cs: ti.template(), con: ti.template(), hair_friction: float,
+                   margin: float):
+    """Fill the contact arrays (up to capacity); contact_count gets the exact total."""
+    n = x.shape[0]
+    n_hair = grid.edge_emit_count[n]
+    con.contact_count[None] = n_hair + grid.vertex_body_emit_count[n]
+    cap = con.capacity
+    for a in x:
+        c = grid.edge_emit_count[a]
+        for k in range(grid.edge_candidate_count[a]):
+            if _emits(grid, a, k):
+                if c < cap:
+                    b = grid.edge_candidate[a, k]
+                    s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+                    pa = x[a] + s * (x[a + 1] - x[a])
+                    pb = x[b] + t * (x[b + 1] - x[b])
+                    nrm = _contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
+                    r = radius[a] + radius[b]
+                    con.contact_vertex[c] = ivec4(a, a + 1, b, b + 1)
+                    con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
+                    con.contact_normal[c] = nrm
+                    con.contact_kinematic[c] = -r * nrm
+                    con.contact_friction[c] = hair_friction
+                    con.contact_collider[c] = -1
+                c += 1
+        if vertex.vertex_is_fixed[a] == 0:
+            cb = n_hair + grid.vertex_body_emit_count[a]
+            for k in range(cs.count_field[None]):
+                body = cs.collider_body[k]
+                R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, body)
+                q = R.transpose() @ (x[a] - T)
+                d, nq = collider_distance(cs, k, q)
+                if d < radius[a] + margin:
+                    if cb < cap:
+                        Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, body)
+                        s_end = Re @ (q - d * nq) + Te
+                        n_end = Re @ nq
+                        con.contact_vertex[cb] = ivec4(a, -1, -1, -1)
+                        con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
+                        con.contact_normal[cb] = n_end
+                        con.contact_kinematic[cb] = -s_end - radius[a] * n_end
+                        con.contact_friction[cb] = cs.collider_friction[k]
+                        con.contact_collider[cb] = k
+                    cb += 1
+
+
+@ti.func
+def _contact_normal(d, ea, eb):
+    """Unit normal from the separation d; for touching centrelines, the common normal of the edges."""
+    nrm = vec3(0.0, 1.0, 0.0)
+    dn = d.norm()
+    if dn > 1e-12:
+        nrm = d / dn
+    else:
+        cr = ea.cross(eb)
+        if cr.norm() > 1e-12:
+            nrm = cr.normalized()
+    return nrm
+
+
+@ti.kernel
+def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_base: ti.template(),
+                    vertex_typical_length: ti.template(), vertex_dt_bend: ti.template(), dt: float,
+                    gravity_norm: float, dynamic: ti.template()):
+    """CSR vertex -> contacts (sorted), W_z (Sec. 4.5 "Collision constraint weights"), D_hat, warm start zero."""
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for i in con.vertex_contact_count:
+        con.vertex_contact_count[i] = 0
+    for c in range(nc):
+        for k in ti.static(range(4)):
+            v = con.contact_vertex[c][k]
+            if v >= 0:
+                ti.atomic_add(con.vertex_contact_count[v], 1)
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        run = 0
+        na = 0
+        for i in range(con.vertex_contact_count.shape[0]):
+            con.vertex_contact_start[i] = run
+            run += con.vertex_contact_count[i]
+            if con.vertex_contact_count[i] > 0:
+                con.active_vertex[na] = i
+                na += 1
+        con.vertex_contact_start[con.vertex_contact_count.shape[0]] = run
+        con.active_vertex_count[None] = na
+    for i in con.vertex_contact_count:
+        con.vertex_contact_count[i] = 0
+    for c in range(nc):
+        for k in ti.static(range(4)):
+            v = con.contact_vertex[c][k]
+            if v >= 0:
+                slot = ti.atomic_add(con.vertex_contact_count[v], 1)
+                con.vertex_contact_list[con.vertex_contact_start[v] + slot] = c
+    # Sort each vertex's list (insertion sort; the atomics above fill in any order).
+    for i in con.vertex_contact_count:
+        beg = con.vertex_contact_start[i]
+        end = con.vertex_contact_start[i + 1]
+        for j in range(beg + 1, end):
+            key = con.vertex_contact_list[j]
+            k = j - 1
+            while k >= beg and con.vertex_contact_list[k] > key:
+                con.vertex_contact_list[k + 1] = con.vertex_contact_list[k]
+                k -= 1
+            con.vertex_contact_list[k + 1] = key
+        # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5).
+        inv_w = 0.0
+        if con.vertex_contact_count[i] > 0 and vertex.vertex_is_fixed[i] == 0:
+            dtt = vertex_dt_bend[i]
+            if gravity_norm > 0.0:
+                dtt = ti.min(dtt, ti.sqrt(vertex_typical_length[i] / gravity_norm))
+            if ti.static(dynamic):
+                dtt = ti.min(dtt, dt)
+            inv_w = dtt * dtt / vertex_weight_base[i]
+        con.vertex_contact_inv_weight[i] = inv_w
+        con.vertex_contact_dual[i] = vec3(0.0)
+    for c in range(nc):
+        dh = 0.0
+        for k in ti.static(range(4)):
+            v = con.contact_vertex[c][k]
+            if v >= 0:
+                h = con.contact_weight[c][k]
+                dh += con.vertex_contact_count[v] * h * h * con.vertex_contact_inv_weight[v]
+        con.contact_delassus[c] = dh
+        con.contact_accumulated[c] = vec3(0.0)
+        con.contact_delta[c] = vec3(0.0)
+        con.contact_status[c] = 0
+
+
+# --------------------------------------------------------------------------- host orchestration
+class ContactPipeline:
+    """Detection, projection and correction for one Model (all fields allocated here, once).
+
+    Used by :class:`~taichi_hair.solver_admm.SolverADMM`; the buffers grow (with
+    a warning that gives the count) only when a detection overflows them.
+
+    Args:
+        model: the Model.
+        config: :class:`~taichi_hair.config.ContactConfig`.
+        colliders: a :class:`~taichi_hair.colliders.ColliderSet` or ``None``.
+    """
+
+    def __init__(self, model, config, colliders=None):
+        import numpy as np
+
+        from .colliders import ColliderSet
+        from .fields import ContactFields, GridFields
+        from .model import _np_float
+
+        self.model = model
+        self.config = config
+        self.colliders = colliders if colliders is not None else ColliderSet([], model.body_count)
+        n = model.vertex_count
+        h = model.host
+        f = _np_float()
+        strand = h["vertex_strand"]
+        radius = np.array([model.materials[s].radius for s in range(model.strand_count)])[strand]
+        density = np.array([model.materials[s].density for s in range(model.strand_count)])[strand]
+        e_bend = np.array([model.materials[s].youngs_modulus_bend for s in range(model.strand_count)])[strand]
+        # Typical edge length L~ per strand (mean rest edge) for dt~ (Sec. 4.5).
+        le = h["edge_rest_length"]
+        counts = np.bincount(strand, weights=(le > 0).astype(float), minlength=model.strand_count)
+        sums = np.bincount(strand, weights=le, minlength=model.strand_count)
+        typical = (sums / np.maximum(counts, 1))[strand]
+        #: Contact radius of each vertex/edge (its strand's radius) [m], shape (vertex_count,).
+        self.vertex_radius = ti.field(float, n)
+        self.vertex_radius.from_numpy(radius.astype(f))
+        #: m_i, for W_z = m_i / dt~^2 [kg], shape (vertex_count,).
+        self.vertex_weight_base = ti.field(float, n)
+        self.vertex_weight_base.from_numpy(np.maximum(h["vertex_mass"], 1e-30).astype(f))
+        #: Typical edge length L~ of the vertex's strand [m]; bending time 2 L~^2/R sqrt(rho/E_b) [s].
+        self.vertex_typical_length = ti.field(float, n)
+        self.vertex_typical_length.from_numpy(typical.astype(f))
+        self.vertex_dt_bend = ti.field(float, n)
+        self.vertex_dt_bend.from_numpy((2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f))
+        self.max_radius = float(radius.max())
+        table = 1
+        while table < 2 * n:
+            table *= 2
+        self.grid = GridFields(n, table, config.max_contacts_per_edge)
+        capacity = max(16, int(config.capacity_per_vertex * n))
+        self.con = ContactFields(capacity, n)
+        self.stats_out = ti.field(float, 4)
+        self.last_max_displacement = 0.0
+        self.grow_events = 0
+        self.detections = 0
+
+    @property
+    def contact_count(self) -> int:
+        return min(int(self.con.contact_count[None]), self.con.capacity)
+
+    def detect(self, state, dt: float, gravity, dynamic: bool) -> int:
+        """Proximity detection at the beginning of a step (Algorithm 1, line 1); returns the contact count."""
+        import warnings
+
+        import numpy as np
+
+        from .fields import ContactFields
+        from .grid import build_hash_grid, compute_edge_bounds, find_candidates
+
+        m, cfg, g = self.model, self.config, self.grid
+        x, v = state.vertex_position, state.vertex_velocity
+        compute_edge_bounds(m, x, v, g)
+        max_edge = float(g.max_edge_length[None])
+        speed = float(g.max_speed[None])
+        # Reach of the step: two vertices may approach by twice the largest advected displacement
+        # |v|max dt plus the free-fall distance |g| dt^2 (proximity detection happens once per step).
+        gn = float(np.linalg.norm(np.asarray(gravity, float)))
+        margin = cfg.margin + (cfg.velocity_margin * (2.0 * speed * dt + gn * dt * dt) if dynamic else 0.0)
+        reach = 2.0 * self.max_radius + margin
+        cell = max(max_edge + reach, 1e-9) * 1.0001
+        if cfg.hair_hair:
+            build_hash_grid(m, g, cell)
+            find_candidates(m, m, x, self.vertex_radius, g, cell, margin)
+        else:
+            g.edge_candidate_count.fill(0)
+        while True:
+            count_contacts(m, x, self.vertex_radius, g, self.colliders, margin)
+            write_contacts(m, m, x, self.vertex_radius, g, self.colliders, self.con, cfg.friction, margin)
+            total = int(self.con.contact_count[None])
+            if total <= self.con.capacity:
+                break
+            new_cap = max(2 * self.con.capacity, int(1.25 * total))
+            warnings.warn(f"contact buffer overflow: {total} contacts for a capacity of {self.con.capacity}; "
+                          f"growing it to {new_cap} and detecting again (no contact dropped)", stacklevel=3)
+            self.con = ContactFields(new_cap, m.vertex_count)
+            self.grow_events += 1
+        build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
+                        dt, gn, dynamic)
+        self.detections += 1
+        self.margin_used = margin
+        return total
+
+    def project(self, x, buf, sweeps: int) -> None:
+        """The z-step and lambda_z update of one ADMM iteration (Sec. 4.5), then W_z for the global step."""
+        from .projection import projection_begin, projection_end, projection_sweep
+
+        projection_begin(x, self.con, False)
+        for _ in range(sweeps):
+            projection_sweep(self.con)
+        projection_end(x, self.con, buf, False)
+
+    def correct(self, x, sweeps: int) -> None:
+        """Optional geometric contact correction at the end of the step: project x itself."""
+        from .projection import projection_begin, projection_end, projection_sweep
+
+        projection_begin(x, self.con, True)
+        for _ in range(sweeps):
+            projection_sweep(self.con)
+        projection_end(x, self.con, None, True)
+
+    def clear(self, buf) -> None:
+        from .projection import clear_contact_terms
+
+        clear_contact_terms(self.con, buf)
+
+    def count_status(self, x) -> None:
+        """Record the sticking/sliding/separating counts of the last ADMM projection (before correction)."""
+        from .projection import contact_statistics
+
+        contact_statistics(x, self.vertex_radius, self.colliders, self.con, self.stats_out, True)
+
+    def statistics(self, x) -> dict:
+        """Contact count, sticking/sliding/separating counts (last ADMM projection), largest penetration [m]."""
+        from .projection import contact_statistics
+
+        contact_statistics(x, self.vertex_radius, self.colliders, self.con, self.stats_out, False)
+        o = self.stats_out.to_numpy()
+        return {"contacts": self.contact_count, "sticking": int(o[0]), "sliding": int(o[1]),
+                "separating": int(o[2]), "max_penetration_m": max(float(o[3]), 0.0)}

@@ -1,0 +1,244 @@
+"""Feasible contact projection: the z-step of Algorithm 1 (Daviet 2023, Sec. 4.5, Eq. 5-6).
+
+Problem (5): W_z z = W_z (x - lambda_z) + H^T r, u = H z + u_kin, (u, r) in C_mu,n.
+
+Hybrid Gauss-Seidel / Jacobi: contacts are split into ``BATCHES`` = 8
+batches (contact c in batch c mod 8: the contact list is sorted by edge, so
+neighbouring contacts, which share vertices, land in different batches);
+batches are processed one after the other, the contacts of a batch in
+parallel, in the paper's two deterministic steps:
+
+1. ``solve_batch_contacts``: for each contact c of the batch,
+   u*_c = (H z)_c + u_kin_c, solve the local Signorini-Coulomb problem for
+   Delta u_c with (u*_c + Delta u_c, r~_c + Delta u_c) in C_mu,n, and
+   accumulate r~_c += Delta u_c (r~ = D r, footnote 3);
+2. ``apply_batch_corrections``: z_i += W_z,i^-1 sum_c h_ci Delta u_c / D_hat_c,
+   each vertex gathering its own contacts in index order (no atomics: the
+   sum has a fixed order, so runs are bitwise reproducible).
+
+D_hat is the mass-split Delassus diagonal (each vertex split into n_i virtual
+copies), which keeps the Jacobi updates inside a batch from overshooting.
+
+The local solve (Daviet 2020, Sec. 5.2, isotropic case): with the scalar
+Delassus D_hat the contact's problem is u = w + r~ with w = u* - r~_old (the
+relative displacement without this contact's correction) and (u, r~) in
+C_mu: r~ in the friction cone, u_N >= 0, r~_N u_N = 0, and either u_T = 0
+(stick) or r~_T = -mu r~_N u_T/|u_T| (slide).  Its solution is explicit:
+
+* take-off, w_N >= 0: r~ = 0;
+* stick, |w_T| <= mu (-w_N): r~ = -w, u = 0;
+* slide: r~ = -w_N n - mu (-w_N) w_T/|w_T|, u = w_T (1 - mu (-w_N)/|w_T|).
+"""
+
+import taichi as ti
+
+from .colliders import body_transform, collider_distance
+
+vec3 = ti.math.vec3
+
+BATCHES = 8
+SEPARATE, STICK, SLIDE = 0, 1, 2
+
+
+@ti.func
+def coulomb_local_solve(w, n, mu: float):
+    """Solution r~ of u = w + r~, (u, r~) in C_mu,n for an isotropic (scalar) Delassus operator.
+
+    Args:
+        w: relative displacement without this contact's correction [m].
+        n: unit contact normal [-].
+        mu: friction coefficient [-].
+
+    Returns:
+        (r~, status): the correction [m] and SEPARATE, STICK or SLIDE.
+    """
+    wn = w.dot(n)
+    r = vec3(0.0)
+    status = SEPARATE
+    if wn < 0.0:
+        wt = w - wn * n
+        wt_norm = wt.norm()
+        if wt_norm <= mu * (-wn):
+            r = -w
+            status = STICK
+        else:
+            r = -wn * n - (mu * (-wn) / wt_norm) * wt
+            status = SLIDE
+    return r, status
+
+
+@ti.func
+def begin_projection(x: ti.template(), con: ti.template()):
+    """z = x - lambda_z + W_z^-1 H^T D_hat^-1 r~ on contact vertices (warm start from the corrections so far)."""
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        z = x[i] - con.vertex_contact_dual[i]
+        iw = con.vertex_contact_inv_weight[i]
+        if iw > 0.0:
+            for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
+                c = con.vertex_contact_list[e]
+                z += (iw * _weight_of(con, c, i) / con.contact_delassus[c]) * con.contact_accumulated[c]
+        else:
+            z = x[i]
+        con.vertex_z[i] = z
+
+
+@ti.func
+def _weight_of(con: ti.template(), c: ti.i32, i: ti.i32) -> float:
+    h = 0.0
+    for k in ti.static(range(4)):
+        if con.contact_vertex[c][k] == i:
+            h += con.contact_weight[c][k]
+    return h
+
+
+@ti.func
+def _contact_u(con: ti.template(), z: ti.template(), c: ti.i32):
+    u = con.contact_kinematic[c]
+    for k in ti.static(range(4)):
+        v = con.contact_vertex[c][k]
+        if v >= 0:
+            u += con.contact_weight[c][k] * z[v]
+    return u
+
+
+@ti.func
+def solve_batch_contacts(con: ti.template(), z: ti.template(), batch: ti.template()):
+    """Step (1) for the contacts of one batch, in parallel."""
+    nc = ti.min(con.contact_count[None], con.capacity)
+    nb = (nc - batch + 7) // 8
+    for j in range(nb):
+        c = j * 8 + batch
+        if con.contact_delassus[c] > 0.0:
+            u_star = _contact_u(con, z, c)
+            r_old = con.contact_accumulated[c]
+            r_new, status = coulomb_local_solve(u_star - r_old, con.contact_normal[c], con.contact_friction[c])
+            con.contact_delta[c] = r_new - r_old
+            con.contact_accumulated[c] = r_new
+            con.contact_status[c] = status
+        else:
+            con.contact_delta[c] = vec3(0.0)
+
+
+@ti.func
+def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.template()):
+    """Step (2): z_i += W_z,i^-1 sum_{c in batch} h_ci Delta u_c / D_hat_c, vertices in parallel."""
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        iw = con.vertex_contact_inv_weight[i]
+        if iw > 0.0:
+            dz = vec3(0.0)
+            for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
+                c = con.vertex_contact_list[e]
+                if c % 8 == batch:
+                    dz += (_weight_of(con, c, i) / con.contact_delassus[c]) * con.contact_delta[c]
+            z[i] += iw * dz
+
+
+@ti.func
+def update_contact_duals(x: ti.template(), con: ti.template(), buf: ti.template()):
+    """lambda_z += z - x; hand W_z and the target lambda_z + z to the global step (Eq. 3)."""
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        iw = con.vertex_contact_inv_weight[i]
+        if iw > 0.0:
+            lam = con.vertex_contact_dual[i] + con.vertex_z[i] - x[i]
+            con.vertex_contact_dual[i] = lam
+            buf.vertex_contact_weight[i] = 1.0 / iw
+            buf.vertex_contact_target[i] = lam + con.vertex_z[i]
+
+
+@ti.kernel
+def clear_contact_terms(con: ti.template(), buf: ti.template()):
+    """Zero W_z and the targets of the global step on the vertices that had contacts."""
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        buf.vertex_contact_weight[i] = 0.0
+        buf.vertex_contact_target[i] = vec3(0.0)
+
+
+@ti.func
+def begin_correction(x: ti.template(), con: ti.template()):
+    """Geometric correction: project x itself (z = x, fresh corrections, lambda_z ignored)."""
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        con.vertex_z[i] = x[i]
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for c in range(nc):
+        con.contact_accumulated[c] = vec3(0.0)
+
+
+@ti.func
+def end_correction(x: ti.template(), con: ti.template()):
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        if con.vertex_contact_inv_weight[i] > 0.0:
+            x[i] = con.vertex_z[i]
+
+
+@ti.kernel
+def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(), con: ti.template(),
+                       out: ti.template(), with_status: ti.template()):
+    """out = (sticking, sliding, separating) counts and the largest penetration [m] at the current x.
+
+    Penetration of a hair-hair contact: r_a + r_b minus the distance of its two
+    (fixed-barycentric) contact points; of a body contact: r minus the signed
+    distance to the collider at the end-of-step transform.
+    """
+    nc = ti.min(con.contact_count[None], con.capacity)
+    if ti.static(with_status):
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = 0.0
+    out[3] = 0.0
+    for c in range(nc):
+        if ti.static(with_status):
+            st = con.contact_status[c]
+            if st == STICK:
+                ti.atomic_add(out[0], 1.0)
+            elif st == SLIDE:
+                ti.atomic_add(out[1], 1.0)
+            else:
+                ti.atomic_add(out[2], 1.0)
+        pen = 0.0
+        k = con.contact_collider[c]
+        vtx = con.contact_vertex[c]
+        if k < 0:
+            w = con.contact_weight[c]
+            d = w[0] * x[vtx[0]] + w[1] * x[vtx[1]] + w[2] * x[vtx[2]] + w[3] * x[vtx[3]]
+            pen = radius[vtx[0]] + radius[vtx[2]] - d.norm()
+        else:
+            R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+            dist, nrm = collider_distance(cs, k, R.transpose() @ (x[vtx[0]] - T))
+            pen = radius[vtx[0]] - dist
+        ti.atomic_max(out[3], pen)
+
+
+@ti.kernel
+def projection_begin(x: ti.template(), con: ti.template(), correction: ti.template()):
+    """Start a z-step: z = x - lambda_z + W_z^-1 H^T D_hat^-1 r~ (or, for the correction, z = x and r~ = 0)."""
+    if ti.static(correction):
+        begin_correction(x, con)
+    else:
+        begin_projection(x, con)
+
+
+@ti.kernel
+def projection_sweep(con: ti.template()):
+    """One Gauss-Seidel sweep over the 8 batches, each in the paper's two deterministic steps.
+
+    Each step is a top-level loop of the kernel; Taichi runs top-level loops
+    one after the other, so the batches stay sequential within one launch.
+    """
+    for batch in ti.static(range(BATCHES)):
+        solve_batch_contacts(con, con.vertex_z, batch)
+        apply_batch_corrections(con, con.vertex_z, batch)
+
+
+@ti.kernel
+def projection_end(x: ti.template(), con: ti.template(), buf: ti.template(), correction: ti.template()):
+    """End a z-step: lambda_z += z - x and W_z for the global step (or, for the correction, x = z)."""
+    if ti.static(correction):
+        end_correction(x, con)
+    else:
+        update_contact_duals(x, con, buf)

@@ -1,0 +1,323 @@
+"""Frictional contacts (Sec. 4.5): local Coulomb solve, detection, projection in the solver, colliders."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
+from taichi_hair.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
+from taichi_hair.config import ContactConfig
+
+HAIR = RodMaterial()
+R = HAIR.radius
+
+
+def line(p0, p1, n):
+    return np.linspace(np.asarray(p0, float), np.asarray(p1, float), n)
+
+
+# --------------------------------------------------------------------------- local solve
+def _solve_many(w, n, mu):
+    from taichi_hair.projection import coulomb_local_solve
+
+    k = len(w)
+    wf = ti.Vector.field(3, float, k)
+    nf = ti.Vector.field(3, float, k)
+    mf = ti.field(float, k)
+    rf = ti.Vector.field(3, float, k)
+    sf = ti.field(ti.i32, k)
+    wf.from_numpy(np.asarray(w, np.float32))
+    nf.from_numpy(np.asarray(n, np.float32))
+    mf.from_numpy(np.asarray(mu, np.float32))
+
+    @ti.kernel
+    def run():
+        for i in wf:
+            r, s = coulomb_local_solve(wf[i], nf[i], mf[i])
+            rf[i] = r
+            sf[i] = s
+
+    run()
+    return rf.to_numpy().astype(np.float64), sf.to_numpy()
+
+
+def test_coulomb_local_solve_hand_cases():
+    n = [0.0, 1.0, 0.0]
+    w = [[0.3, 0.5, 0.0],     # separating: normal part >= 0
+         [0.1, -1.0, 0.2],    # inside the cone: |w_T| = 0.224 <= 0.5 * 1
+         [2.0, -1.0, 0.0]]    # outside: slides
+    r, s = _solve_many(w, [n] * 3, [0.5] * 3)
+    assert s.tolist() == [0, 1, 2]
+    np.testing.assert_allclose(r[0], 0.0, atol=0)
+    np.testing.assert_allclose(r[1], [-0.1, 1.0, -0.2], rtol=1e-6)          # r = -w, u = 0
+    np.testing.assert_allclose(r[2], [-0.5, 1.0, 0.0], rtol=1e-6)           # r_N = 1, |r_T| = mu r_N
+    u = np.asarray(w[2]) + r[2]
+    np.testing.assert_allclose(u, [1.5, 0.0, 0.0], rtol=1e-6)               # slides on, with less speed
+
+
+def test_coulomb_local_solve_satisfies_the_law_on_random_inputs():
+    rng = np.random.default_rng(3)
+    k = 2000
+    w = rng.normal(size=(k, 3))
+    n = rng.normal(size=(k, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    mu = rng.uniform(0, 1.2, k)
+    r, s = _solve_many(w, n, mu)
+    u = w + r
+    rn = np.sum(r * n, 1)
+    un = np.sum(u * n, 1)
+    rt = r - rn[:, None] * n
+    ut = u - un[:, None] * n
+    tol = 1e-5 * (1 + np.abs(w).max(1))
+    assert np.all(rn >= -tol)                                             # compressive only
+    assert np.all(np.linalg.norm(rt, axis=1) <= mu * rn + tol)            # inside the cone
+    assert np.all(un >= -tol)                                             # no penetration
+    assert np.all(np.abs(rn * un) <= tol * (1 + np.abs(rn)))              # complementarity
+    slide = s == 2
+    assert slide.any() and (s == 1).any() and (s == 0).any()
+    # Sliding: force on the cone boundary, opposed to the slip (maximal dissipation).
+    cosang = np.sum(rt[slide] * ut[slide], 1) / (np.linalg.norm(rt[slide], axis=1) * np.linalg.norm(ut[slide], axis=1))
+    assert np.all(cosang < -1 + 1e-4)
+    stick = s == 1
+    assert np.all(np.linalg.norm(u[stick], axis=1) <= tol[stick])
+
+
+# --------------------------------------------------------------------------- detection
+def _brute_force_contacts(x, strand_of, edges, radius, margin, K):
+    """All pairs within reach, then the paper's rule: keep a pair if it is among the K closest of either edge."""
+    from itertools import combinations
+
+    def seg_dist(p0, p1, q0, q1):
+        # Dense sampling is too coarse; use a fine 1D minimisation with the exact formula instead.
+        d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+        a, e, f = d1 @ d1, d2 @ d2, d2 @ r
+        c, b = d1 @ r, d1 @ d2
+        den = a * e - b * b
+        s = np.clip((b * f - c * e) / den, 0, 1) if den > 1e-12 * a * e else 0.0
+        t = (b * s + f) / e
+        if t < 0:
+            t, s = 0.0, np.clip(-c / a, 0, 1)
+        elif t > 1:
+            t, s = 1.0, np.clip((b - c) / a, 0, 1)
+        return np.linalg.norm(p0 + s * d1 - q0 - t * d2)
+
+    near = {a: [] for a in edges}
+    for a, b in combinations(edges, 2):
+        if strand_of[a] == strand_of[b] and abs(a - b) <= 1:
+            continue
+        d = seg_dist(x[a], x[a + 1], x[b], x[b + 1])
+        if d < 2 * radius + margin:
+            near[a].append((d, b))
+            near[b].append((d, a))
+    top = {a: {b for _, b in sorted(v)[:K]} for a, v in near.items()}
+    crowded = sum(len(v) > K for v in near.values())
+    return {(min(a, b), max(a, b)) for a in edges for b in top[a]}, crowded
+
+
+def test_detection_matches_brute_force_on_random_edges():
+    """Random short strands in a small box: the hash grid + DOP + top-K finds exactly the brute-force set."""
+    rng = np.random.default_rng(7)
+    b = GroomBuilder()
+    mat = RodMaterial(radius=6e-4)
+    for s in range(80):
+        p0 = rng.uniform(0, 0.012, 3)
+        d = rng.normal(size=(4, 3))
+        pts = p0 + np.cumsum(2e-3 * d / np.linalg.norm(d, axis=1, keepdims=True), axis=0)
+        b.add_strand(pts, mat, root="free")
+    model = b.finalize()
+    st = model.state()
+    cfg = ContactConfig(margin=2e-4, max_contacts_per_edge=6)
+    from taichi_hair.contacts import ContactPipeline
+
+    pipe = ContactPipeline(model, cfg)
+    pipe.colliders.begin_step(model.control())
+    total = pipe.detect(st, 1e-3, (0, -9.81, 0), True)
+    vtx = pipe.con.contact_vertex.to_numpy()[:total]
+    found = {(min(v[0], v[2]), max(v[0], v[2])) for v in vtx}
+    assert len(found) == total  # emitted once each
+    x = st.positions().astype(np.float64)
+    edges = [i for i in range(model.vertex_count) if model.host["edge_rest_length"][i] > 0]
+    expected, crowded = _brute_force_contacts(x, model.host["vertex_strand"], edges, mat.radius, cfg.margin, 6)
+    assert found == expected
+    assert total > 100 and crowded > 10  # the 6-closest rule was exercised
+
+
+# --------------------------------------------------------------------------- solver scenes
+def _solver(model, colliders=None, iterations=10, **contact):
+    cfg = SolverADMMConfig(iterations=iterations, contacts=ContactConfig(**contact))
+    return SolverADMM(model, cfg, colliders=colliders)
+
+
+def test_rod_resting_on_a_plane_stays_there():
+    b = GroomBuilder()
+    b.add_strand(line((0, R, 0), (0.03, R, 0), 13), HAIR, root="free")
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    x0 = st.positions().astype(np.float64)
+    solver = _solver(model, [PlaneCollider(friction=0.3)])
+    for _ in range(60):
+        solver.step(st, ctl, 1 / 240)
+    x = st.positions().astype(np.float64)
+    assert np.abs(x[:, 1] - R).max() < 0.05 * R
+    assert np.abs(x[:, [0, 2]] - x0[:, [0, 2]]).max() < 1e-6
+    assert solver.contact_stats["contacts"] == 13
+    assert solver.contact_stats["sticking"] == 13
+
+
+def _incline_run(angle_deg, mu, steps=48, dt=1 / 240):
+    """A short free rod lying along the slope of an inclined plane (through the origin)."""
+    a = math.radians(angle_deg)
+    down = np.array([math.cos(a), -math.sin(a), 0.0])
+    normal = np.array([math.sin(a), math.cos(a), 0.0])
+    b = GroomBuilder()
+    pts = line(-0.005 * down, 0.005 * down, 6) + R * normal
+    b.add_strand(pts, HAIR, root="free")
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    solver = _solver(model, [PlaneCollider(normal=normal, friction=mu)], iterations=20)
+    c0 = st.positions().astype(np.float64).mean(0)
+    for _ in range(steps):
+        solver.step(st, ctl, dt)
+    x = st.positions().astype(np.float64)
+    along = float((x.mean(0) - c0) @ down)
+    off = float(np.abs((x - R * normal) @ normal).max())
+    return along, off
+
+
+def test_incline_sticks_below_the_friction_angle_and_slides_with_coulomb_acceleration_above():
+    mu = 0.4
+    along, off = _incline_run(15.0, mu)     # tan 15 deg = 0.27 < 0.4: sticks
+    assert abs(along) < 1e-6 and off < 0.05 * R
+    steps, dt = 48, 1 / 240
+    for angle in (30.0, 45.0):             # tan > mu: slides with a = g (sin - mu cos)
+        along, off = _incline_run(angle, mu, steps, dt)
+        a = 9.81 * (math.sin(math.radians(angle)) - mu * math.cos(math.radians(angle)))
+        # Backward Euler from rest: s_n = a dt^2 n (n + 1) / 2.
+        expected = a * dt * dt * steps * (steps + 1) / 2
+        assert abs(along / expected - 1) < 0.02, (angle, along, expected)
+        assert off < 0.05 * R
+
+
+def test_crossing_rods_pressed_together_do_not_pass_through():
+    """Rod B falls across clamped rod A near A's root and is pressed on it by a strong gravity: it stays above A."""
+    b = GroomBuilder()
+    b.add_strand(line((0, 0, 0), (0.01, 0, 0), 9), HAIR)                        # A: short clamped cantilever
+    b.add_strand(line((0.005, 0.0003, -0.004), (0.005, 0.0003, 0.004), 9), HAIR, root="free")  # B across it
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    ctl.gravity = (0.0, -50.0, 0.0)
+    solver = _solver(model, iterations=20, friction=0.5)
+    for _ in range(40):
+        solver.step(st, ctl, 1 / 480)
+    x = st.positions().astype(np.float64)
+    a, bb = x[:9], x[9:]
+    k = int(np.argmin(np.abs(bb[:, 2])))           # B's vertex over A
+    j = int(np.argmin(np.abs(a[:, 0] - bb[k, 0])))  # A's vertex under it
+    assert bb[k, 1] > a[j, 1] + R, (bb[k], a[j])
+    assert bb[k, 1] < 0.0002                       # it did fall onto A
+    assert solver.contact_stats["contacts"] > 0
+    assert solver.contact_stats["max_penetration_m"] < 0.2 * R
+
+
+@pytest.mark.parametrize("kind", ["sphere", "capsule", "mesh"])
+def test_rod_dropped_on_a_body_does_not_penetrate(kind):
+    import trimesh
+
+    radius = 0.01
+    if kind == "sphere":
+        col = SphereCollider(radius=radius, friction=0.3)
+    elif kind == "capsule":
+        col = CapsuleCollider(p0=(0, 0, -0.02), p1=(0, 0, 0.02), radius=radius, friction=0.3)
+    else:
+        col = MeshCollider(trimesh.creation.icosphere(4, radius), resolution=48, friction=0.3)
+    b = GroomBuilder()
+    b.add_strand(line((-0.008, radius + 0.002, 0.001), (0.008, radius + 0.002, 0.001), 11), HAIR, root="free")
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    solver = _solver(model, [col], iterations=15)
+    cs = solver.contacts.colliders
+    worst = 0.0
+    for _ in range(50):
+        solver.step(st, ctl, 1 / 240)
+        d = cs.distance_numpy(st.positions(), ctl, 0)
+        worst = max(worst, float(R - d.min()))
+    # Fell and touched (the middle rests on top), never more than a tenth of a radius inside (+ SDF error).
+    tol = 0.1 * R + (1e-4 * radius if kind != "mesh" else 2e-5)
+    assert worst < tol, worst
+    assert st.positions()[:, 1].min() < radius + 0.002
+
+
+def test_mesh_sdf_matches_the_analytic_distance_and_orientation():
+    import trimesh
+
+    box = trimesh.creation.box(extents=(0.04, 0.02, 0.01))
+    box.apply_translation((0.01, -0.005, 0.002))
+    col = MeshCollider(box, resolution=64)
+    cs = ColliderSet([col], 1)
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-0.03, 0.03, (500, 3)) * [1, 0.6, 0.4] + [0.01, -0.005, 0.002]
+    q = np.abs(p - [0.01, -0.005, 0.002]) - [0.02, 0.01, 0.005]
+    exact = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
+    d = cs.distance_numpy(p.astype(np.float32), None, 0)
+    near = np.abs(exact) < 0.004
+    # Trilinear interpolation of a box SDF: exact on faces, rounded near edges by about a voxel.
+    assert np.median(np.abs(d - exact)[near]) < 0.2 * col.spacing
+    assert np.all(np.sign(d[np.abs(exact) > 2 * col.spacing]) == np.sign(exact[np.abs(exact) > 2 * col.spacing]))
+
+
+def test_non_watertight_mesh_warns_and_uses_an_unsigned_shell():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(3, 0.01)
+    open_mesh = trimesh.Trimesh(sphere.vertices, sphere.faces[: len(sphere.faces) // 2], process=False)
+    with pytest.warns(UserWarning, match="not watertight"):
+        col = MeshCollider(open_mesh, resolution=32, thickness=5e-4)
+    assert not col.watertight
+    assert col.sdf.min() >= -5e-4 - 1e-9   # no "inside": at worst the shell thickness
+
+
+def test_bad_collider_parameters_name_the_field():
+    with pytest.raises(ValueError, match="SphereCollider.radius"):
+        SphereCollider(radius=-1.0)
+    with pytest.raises(ValueError, match="PlaneCollider.normal"):
+        PlaneCollider(normal=(0, 0, 0))
+    with pytest.raises(ValueError, match="friction"):
+        CapsuleCollider(friction=float("nan"))
+    with pytest.raises(ValueError, match="ContactConfig.friction"):
+        ContactConfig(friction=-0.1)
+    with pytest.raises(ValueError, match="body 3 does not exist"):
+        ColliderSet([SphereCollider(body=3)], 1)
+
+
+def _two_layer_model():
+    rng = np.random.default_rng(11)
+    b = GroomBuilder()
+    for s in range(12):
+        z = 0.002 * (s - 6) + rng.uniform(-2e-4, 2e-4)
+        y = 0.0004 * (s % 2)
+        b.add_strand(line((0, y, z), (0.02, y - 0.002, z + 0.001 * (s % 3 - 1)), 9), HAIR)
+    return b.finalize()
+
+
+def _run_layers(capacity_per_vertex=2.0, steps=12):
+    model = _two_layer_model()
+    st, ctl = model.state(), model.control()
+    solver = _solver(model, [SphereCollider(center=(0.015, -0.012, 0), radius=0.01)],
+                     capacity_per_vertex=capacity_per_vertex, margin=5e-4)
+    for _ in range(steps):
+        solver.step(st, ctl, 1 / 120)
+    return st.positions(), solver
+
+
+def test_contacts_are_bitwise_deterministic_and_overflow_grows_without_dropping():
+    x1, s1 = _run_layers()
+    x2, _ = _run_layers()
+    assert np.array_equal(x1, x2)
+    assert s1.contact_stats["contacts"] > 0
+    with pytest.warns(UserWarning, match="contact buffer overflow"):
+        x3, s3 = _run_layers(capacity_per_vertex=0.01)
+    assert s3.contacts.grow_events >= 1
+    assert np.array_equal(x1, x3)  # same contacts, same order: the same bits
