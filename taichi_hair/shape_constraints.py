@@ -271,13 +271,22 @@ def initialize_rest_transforms(model: ti.template(), solver: ti.template()):
 
 # =========================================================================== per-step stages
 @ti.kernel
-def compute_head_rotations(model: ti.template(), body_rotation: ti.template(), solver: ti.template()):
-    """^wR_H of each strand as a quaternion: the rotation of its root body (identity if free)."""
+def compute_head_rotations(model: ti.template(), body_rotation: ti.template(), x: ti.template(),
+                           solver: ti.template()):
+    """^wR_H of each strand as a quaternion: the rotation of its root body.
+
+    A free strand has no body; its "head" is the shortest arc taking its rest root edge onto its
+    begin-of-step root edge, so Method 3's goals and Method 2's first transforms turn with it.
+    """
     for s in model.strand_body:
         b = model.strand_body[s]
         q = quat_identity()
         if b >= 0:
             q = quat_from_matrix(body_rotation[b])
+        else:
+            a = model.strand_vertex_start[s]
+            rest_x = quat_rotate(solver.vertex_rest_rotation[a], vec3(1.0, 0.0, 0.0))
+            q = quat_between(rest_x, safe_normalized(x[a + 1] - x[a], rest_x))
         solver.strand_head_rotation[s] = q
 
 

@@ -36,7 +36,8 @@ Choices where the paper is silent (each is also stated where it is implemented):
   and 3 curly 20-vertex strands with 3 iterations and damping 0.2 still moved at 0.6 m/s after
   600 steps, against 2e-6 m/s from the head-carried start).
 * Free strands (no body): no global constraint (there is no head to carry the goal); their root
-  frame is the rest frame turned by the shortest arc onto the current root edge.
+  frame is the rest frame turned by the shortest arc onto the current root edge, and their "head"
+  rotation (for Method 3 and Method 2's first transforms) the same arc at the start of the step.
 * Frame 0's y axis is the model's ``strand_root_director`` (the paper's "arbitrary vector").
 * Regions: each strand has a region id; a region has its own S_G, range, falloff, S_L, iteration
   counts and damping.  Methods 2 and 3 launch the largest iteration count and skip the strands
@@ -417,7 +418,7 @@ class SolverShape:
         t0 = self._tick()
 
         # 1-2. Head transforms, forces and Verlet integration (Sec. 3.1, 3.2).
-        sc.compute_head_rotations(m, rot, self)
+        sc.compute_head_rotations(m, rot, x, self)
         sc.begin_step(x, v, self)
         sc.integrate(m, self, rot, tr, ti.math.vec3(*control.gravity), ti.math.vec3(*control.air_velocity),
                      cfg.air_drag, dt, x)

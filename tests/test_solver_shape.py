@@ -310,6 +310,24 @@ def test_curly_strands_hold_their_rest_shape_without_gravity(curly_rig, method):
     assert np.max(np.abs(rig.state.vertex_velocity.to_numpy())) < 2e-4
 
 
+@pytest.mark.parametrize("method", [1, 2, 3])
+def test_free_strand_keeps_its_shape_when_turned(curly_rig, method):
+    """A free curly strand turned rigidly (about an axis normal to its root edge) is at rest: its
+    root frame, and for Method 3 its head rotation, turn with it."""
+    rig = curly_rig
+    free = rig.vertices([FREE_CURLY])
+    x0 = rig.rest
+    t0 = x0[free[1]] - x0[free[0]]
+    axis = np.cross(t0, [0.3, 0.2, 1.0])
+    R = _rotation(axis, 1.0)
+    turned = x0.copy()
+    turned[free] = (x0[free] - x0[free[0]]) @ R.T + x0[free[0]]
+    solver = rig.configure(method, [region(local_stiffness=0.9, length_iterations=2)])
+    x = rig.run(solver, 30, gravity=(0.0, 0.0, 0.0), positions=turned)
+    assert np.abs(x[free] - turned[free]).max() < 2e-5
+    assert np.abs(turned[free] - x0[free]).max() > 0.05
+
+
 def test_global_stiffness_one_freezes_the_strand_under_gravity(curly_rig):
     """Sec. 3.3: S_G = 1 over the whole strand makes the hair rigid, frozen to the initial shape."""
     rig = curly_rig
