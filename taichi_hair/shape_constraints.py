@@ -383,23 +383,17 @@ def apply_local_shape_constraints_serial(model: ti.template(), solver: ti.templa
 
 
 @ti.kernel
-def initialize_global_transforms(model: ti.template(), solver: ti.template(), x: ti.template()):
-    """Method 2 start of step: ^wR_i <- ^wR_H ^wR_i^0 (the rest transforms carried by the head; root
-    frames as in :func:`root_rotation`).  The step so depends on the State only."""
+def initialize_global_transforms(model: ti.template(), solver: ti.template(), x: ti.template(),
+                                 rotation: ti.template()):
+    """Method 2 start of step: ^wR_i <- ^wR_H ^wR_i^0, the rest transforms carried by the head (root
+    frames as in :func:`root_rotation`)."""
     for i in x:
         s = model.vertex_strand[i]
         k = model.vertex_local_index[i]
         if k <= 1:
-            solver.vertex_rotation[i] = root_rotation(model, solver, x, s, k)
+            rotation[i] = root_rotation(model, solver, x, s, k)
         else:
-            solver.vertex_rotation[i] = quat_mul(solver.strand_head_rotation[s], solver.vertex_rest_rotation[i])
-
-
-@ti.kernel
-def copy_global_transforms(solver: ti.template()):
-    """Algorithm 4 l.3-5: ^wT_temp_i <- ^wT_i."""
-    for i in solver.vertex_rotation:
-        solver.vertex_rotation_temp[i] = solver.vertex_rotation[i]
+            rotation[i] = quat_mul(solver.strand_head_rotation[s], solver.vertex_rest_rotation[i])
 
 
 @ti.kernel
@@ -407,17 +401,19 @@ def apply_local_shape_constraints_batch(
     use_rest: ti.template(),
     model: ti.template(),
     solver: ti.template(),
+    rotation: ti.template(),
     parity: ti.i32,
     iteration: ti.i32,
     x: ti.template(),
 ):
     """Eq. 4 for the vertices i >= 2 whose local index has the given parity, all strands in parallel.
 
-    Method 2 (Alg. 4 l.12-13) reads frame i-1 from ``vertex_rotation_temp``; Method 3 (Alg. 5,
-    ``use_rest``) from the rest transform carried by the head, ^wR_H ^wR_{i-1}^0.  Either way the
-    frame's origin is the current P_{i-1}.  Vertex i writes P_{i-1} and P_i, so the even batch then
-    the odd batch never write the same vertex twice (Sec. 5's batching).  A strand whose region has
-    fewer iterations than ``iteration + 1`` is skipped.
+    Method 2 (Alg. 4 l.12-13) reads frame i-1 from ``rotation``, the transforms ^wT_temp of the
+    previous iteration; Method 3 (Alg. 5, ``use_rest``) uses the rest transform carried by the head,
+    ^wR_H ^wR_{i-1}^0, and ignores ``rotation``.  Either way the frame's origin is the current
+    P_{i-1}.  Vertex i writes P_{i-1} and P_i, so the even batch then the odd batch never write the
+    same vertex twice (Sec. 5's batching).  A strand whose region has fewer iterations than
+    ``iteration + 1`` is skipped.
     """
     for i in x:
         k = model.vertex_local_index[i]
@@ -429,7 +425,7 @@ def apply_local_shape_constraints_batch(
                 if ti.static(use_rest):
                     q = quat_mul(solver.strand_head_rotation[s], solver.vertex_rest_rotation[i - 1])
                 else:
-                    q = solver.vertex_rotation_temp[i - 1]
+                    q = rotation[i - 1]
                 goal = x[i - 1] + quat_rotate(q, solver.vertex_rest_local_position[i])
                 p_prev, p_i = local_shape_correction(x[i - 1], x[i], goal, solver.region_local_stiffness[r],
                                                      inverse_mass(model, i - 1), inverse_mass(model, i))
@@ -438,16 +434,22 @@ def apply_local_shape_constraints_batch(
 
 
 @ti.kernel
-def update_global_transforms_jacobi(model: ti.template(), solver: ti.template(), iteration: ti.i32,
-                                    x: ti.template()):
-    """Algorithm 4 l.9-16: ^wR_i <- ^wR_temp_{i-1} ^{i-1}R_i, every vertex in parallel (Jacobi)."""
+def update_global_transforms_jacobi(model: ti.template(), solver: ti.template(), rotation_in: ti.template(),
+                                    iteration: ti.i32, x: ti.template(), rotation_out: ti.template()):
+    """Algorithm 4 l.9-16: ^wR_i <- ^wR_temp_{i-1} ^{i-1}R_i, every vertex in parallel (Jacobi).
+
+    Reading ``rotation_in`` (^wT_temp) and writing ``rotation_out`` (^wT) is Algorithm 4's copy
+    ^wT_temp <- ^wT done by swapping two buffers between iterations instead of copying.
+    """
     for i in x:
         s = model.vertex_strand[i]
         k = model.vertex_local_index[i]
         if k <= 1:
-            solver.vertex_rotation[i] = root_rotation(model, solver, x, s, k)
+            rotation_out[i] = root_rotation(model, solver, x, s, k)
         elif iteration < solver.region_local_iterations[solver.strand_region[s]]:
-            solver.vertex_rotation[i] = advance_frame(solver.vertex_rotation_temp[i - 1], x[i - 1], x[i])
+            rotation_out[i] = advance_frame(rotation_in[i - 1], x[i - 1], x[i])
+        else:
+            rotation_out[i] = rotation_in[i]
 
 
 @ti.kernel

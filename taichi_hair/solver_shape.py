@@ -8,7 +8,7 @@ Per step (the paper's Algorithm 1; kernels in :mod:`taichi_hair.shape_constraint
 3. global shape constraints                  -- ``apply_global_shape_constraints`` (Sec. 3.3, Eq. 2)
 4. local shape constraints, iterated         -- Sec. 3.4, Eq. 4, with the transforms of Sec. 4.2:
    Method 1 ``apply_local_shape_constraints_serial`` (Algorithm 3, serial per strand),
-   Method 2 ``copy_global_transforms`` + ``apply_local_shape_constraints_batch`` +
+   Method 2 ``initialize_global_transforms``, then ``apply_local_shape_constraints_batch`` +
    ``update_global_transforms_jacobi`` (Algorithm 4, Jacobi, parallel per vertex),
    Method 3 ``apply_local_shape_constraints_batch(use_rest=True)`` (Algorithm 5, rest transforms)
 5. edge length constraints, iterated         -- ``solve_edge_lengths_batch`` [MHHR07]
@@ -249,7 +249,8 @@ class SolverShape:
     Fields (all allocated here, shape (vertex_count,) unless stated):
         vertex_rest_rotation: ^wR_i^0, rest global rotation of frame i, quaternion (x, y, z, w) [-].
         vertex_rest_local_position: ^{i-1}P_i^0, vertex i in rest frame i-1 (0 at the root) [m].
-        vertex_rotation, vertex_rotation_temp: ^wR_i and ^wR_temp_i of Method 2 [-].
+        vertex_rotation, vertex_rotation_temp: ^wR_i and ^wR_temp_i of Method 2, swapped after each
+            iteration (the latest is :attr:`global_rotation`), quaternions [-].
         vertex_arc_fraction: rest arc length from the root over the strand's length [-].
         vertex_position_begin, vertex_velocity_begin: x^t [m] and v^t [m/s].
         strand_region: region id, shape (strand_count,) [-].
@@ -319,6 +320,8 @@ class SolverShape:
         self.upload_regions()
         sc.initialize_rest_transforms(model, self)
         self.vertex_rotation.copy_from(self.vertex_rest_rotation)
+        #: Method 2's latest global transforms ^wR_i (one of the two buffers) [-].
+        self.global_rotation = self.vertex_rotation
         self.profile = profile
         self.stage_seconds = {k: 0.0 for k in STAGES}
         self.step_count = 0
@@ -450,17 +453,19 @@ class SolverShape:
         m, method = self.model, self.config.method
         if method == 1:  # Algorithm 3: one launch, strands in parallel, vertices and iterations serial.
             sc.apply_local_shape_constraints_serial(m, self, x)
-        elif method == 2:  # Algorithm 4.
-            sc.initialize_global_transforms(m, self, x)
+        elif method == 2:  # Algorithm 4; ^wT_temp <- ^wT (l.3-5) by swapping the two buffers.
+            cur, temp = self.vertex_rotation, self.vertex_rotation_temp
+            sc.initialize_global_transforms(m, self, x, cur)
             for it in range(self._max_local_iterations):
-                sc.copy_global_transforms(self)
-                sc.apply_local_shape_constraints_batch(False, m, self, 0, it, x)
-                sc.apply_local_shape_constraints_batch(False, m, self, 1, it, x)
-                sc.update_global_transforms_jacobi(m, self, it, x)
+                cur, temp = temp, cur
+                sc.apply_local_shape_constraints_batch(False, m, self, temp, 0, it, x)
+                sc.apply_local_shape_constraints_batch(False, m, self, temp, 1, it, x)
+                sc.update_global_transforms_jacobi(m, self, temp, it, x, cur)
+            self.global_rotation = cur
         else:  # Algorithm 5.
             for it in range(self._max_local_iterations):
-                sc.apply_local_shape_constraints_batch(True, m, self, 0, it, x)
-                sc.apply_local_shape_constraints_batch(True, m, self, 1, it, x)
+                sc.apply_local_shape_constraints_batch(True, m, self, self.vertex_rest_rotation, 0, it, x)
+                sc.apply_local_shape_constraints_batch(True, m, self, self.vertex_rest_rotation, 1, it, x)
 
     def check_finite(self, state: State) -> None:
         """Raise SimulationDivergedError (after restoring the begin-of-step state) on NaN/inf."""

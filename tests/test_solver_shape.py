@@ -399,7 +399,7 @@ def test_jacobi_transforms_converge_to_the_serial_ones(curly_rig):
     deformed[fixed] = x0[fixed]
     solver = rig.configure(2, [region(local_iterations=30, length_iterations=0, damping=1.0)], air_drag=0.0)
     x = rig.run(solver, 1, gravity=(0.0, 0.0, 0.0), positions=deformed).astype(np.float64)
-    rot = solver.vertex_rotation.to_numpy().astype(np.float64)
+    rot = solver.global_rotation.to_numpy().astype(np.float64)
     rest = solver.vertex_rest_rotation.to_numpy().astype(np.float64)
     start, count = rig.model.host["strand_vertex_start"][0], rig.model.host["strand_vertex_count"][0]
     q = rest[start + 1]
