@@ -685,7 +685,8 @@ def test_missing_usd_core_gives_a_clear_error(tmp_path, monkeypatch):
     assert not (tmp_path / "x.usda").exists()
     (tmp_path / "y.usda").write_text("#usda 1.0\n")
     with pytest.raises(ImportError, match="usd-core"):
-        load_groom(tmp_path / "y.usda")
-    args = _parser().parse_args(["info", str(tmp_path / "y.usda")])
+        load_groom(tmp_path / "y.usda", isolate=False)
+    save_groom(g, tmp_path / "g.hair")
+    args = _parser().parse_args(["convert", str(tmp_path / "g.hair"), str(tmp_path / "g.usda")])
     with pytest.raises(ValueError, match="usd-core"):  # the CLI turns it into a one-line error
         args.func(args)

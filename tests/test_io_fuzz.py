@@ -107,10 +107,13 @@ def mutations(data: bytes, rng, count: int):
         yield "corrupt", bytes(b)
 
 
-def _load(path, fmt):
+def _load(path, fmt, detect=False):
     if fmt == "tfxmesh":
         return read_tfxmesh(path)
-    return load_groom(path, format=fmt)
+    # USD in-process, for speed (a child process per case would take minutes): this seed's cases
+    # are known not to crash usd-core; test_usd_crash_is_isolated covers the default, isolated path.
+    options = {"isolate": False} if fmt == "usd" else {}
+    return load_groom(path, format=None if detect else fmt, **options)
 
 
 def check_case(path, fmt, data, strict_truncation, kind, detect=False):
@@ -122,7 +125,7 @@ def check_case(path, fmt, data, strict_truncation, kind, detect=False):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            result = _load(path, None if detect else fmt) if not (detect and fmt == "tfxmesh") else _load(path, fmt)
+            result = _load(path, fmt, detect)
     except GroomFormatError as exc:
         assert str(path) in str(exc), f"{fmt} {kind}: the message does not name the file: {exc}"
         outcome = "error"
@@ -197,19 +200,58 @@ def test_huge_counts_fail_before_allocating(tmp_path, fmt, header, count):
         tracemalloc.stop()
 
 
-def test_usd_corrupt_crate_cannot_exhaust_memory():
+DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "io")
+
+
+@pytest.mark.parametrize("isolate", [True, False])
+def test_usd_corrupt_crate_cannot_exhaust_memory(isolate):
     """A fuzzed .usdc (found by this fuzzer) on which usd-core alone grows to ~4 GB resident.
 
-    read_usd caps the address space during the read, so it fails with a clean error.
+    read_usd caps the address space during the read (in the child, or in this
+    process with isolate=False), so it fails with a clean error.
     """
     pytest.importorskip("pxr")
     import resource
 
-    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "io", "fuzzed_huge_alloc.usdc")
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
+    path = os.path.join(DATA, "fuzzed_huge_alloc.usdc")
+    who = resource.RUSAGE_CHILDREN if isolate else resource.RUSAGE_SELF
+    before = resource.getrusage(who).ru_maxrss  # KiB on Linux
     t0 = time.perf_counter()
     with pytest.raises(GroomFormatError, match="fuzzed_huge_alloc.usdc"):
-        load_groom(path, format="usd")
-    grown_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+        load_groom(path, format="usd", isolate=isolate)
+    grown_mib = (resource.getrusage(who).ru_maxrss - before) / 1024
     assert grown_mib < 2500, f"the read grew the resident set by {grown_mib:.0f} MiB"
-    assert time.perf_counter() - t0 < 5.0
+    assert time.perf_counter() - t0 < 10.0
+
+
+def test_usd_crash_is_isolated():
+    """A fuzzed .usdc (found by this fuzzer) on which usd-core 26.11 segfaults in Stage.Open.
+
+    The default read runs usd-core in a child process, so the crash becomes a GroomFormatError.
+    """
+    pytest.importorskip("pxr")
+    path = os.path.join(DATA, "fuzzed_segfault.usdc")
+    with pytest.raises(GroomFormatError, match=r"fuzzed_segfault\.usdc: usd-core crashed \(SIGSEGV\)"):
+        load_groom(path)
+
+
+def test_usd_fuzz_through_the_isolated_reader(tmp_path):
+    """A few mutated .usdc files through the default (child-process) reader."""
+    pytest.importorskip("pxr")
+    rng = np.random.default_rng(SEED + 1)
+    g = small_groom(rng)
+    save_groom(g, tmp_path / "s.usdc")
+    data = (tmp_path / "s.usdc").read_bytes()
+    p = tmp_path / "f.usdc"
+    outcomes = []
+    for kind, mutated in list(mutations(data, rng, 6))[::2]:
+        p.write_bytes(mutated)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                load_groom(p).validate()
+            outcomes.append("ok")
+        except GroomFormatError as exc:
+            assert str(p) in str(exc)
+            outcomes.append("error")
+    assert outcomes.count("error") >= len(outcomes) // 2

@@ -28,6 +28,7 @@ temporary file in the target's directory and renames it into place.
 
 from __future__ import annotations
 
+import inspect
 import math
 import os
 import warnings
@@ -123,7 +124,7 @@ def detect_format(path) -> str:
         try:
             with zipfile.ZipFile(path) as zf:
                 names = zf.namelist()
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError):
+        except Exception:  # noqa: BLE001 - any failure to list it: not an archive we can use; the reader reports
             names = []
         if names and all(n.endswith(".npy") for n in names):
             return "thair"
@@ -209,7 +210,12 @@ def load_groom(path, format: str | None = None, scale: float | None = None, **op
     fmt = normalize_format(format) if format else detect_format(path)
     if fmt == "tfxmesh":
         raise GroomFormatError(path, "is a TressFX collision mesh, not a groom; use taichi_hair.io.read_tfxmesh")
-    groom = READERS[fmt](path, **options)
+    reader = READERS[fmt]
+    if not format and options:
+        # Options name one format's reader (dtype for OBJ, isolate for USD); detection may pick another.
+        accepted = inspect.signature(reader).parameters
+        options = {k: v for k, v in options.items() if k in accepted}
+    groom = reader(path, **options)
     if scale is not None:
         if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
             raise ValueError(f"load_groom: scale must be a finite positive number, got {scale!r}")
