@@ -5,7 +5,9 @@
 
 For each format: the file size, the best of ``--repeat`` wall times of
 ``save_groom`` and ``load_groom`` (ms), throughput in MB/s of file bytes and in
-strands/s, and a bit-for-bit check of the loaded points.  Prints a table and
+strands/s, and a bit-for-bit check of the loaded points.  USD is loaded both
+the default way (usd-core in a child process, which includes its ~0.5 s start)
+and in-process (``isolate=False``).  Prints a table and
 writes ``benchmarks/results/io.json``.
 """
 
@@ -29,19 +31,20 @@ if ROOT not in sys.path:
 
 from taichi_hair.io import Groom, load_groom, save_groom  # noqa: E402
 
-# (label, format, extension, writer options)
+# (label, format, extension, writer options, reader options)
 CASES = [
-    ("hair", "hair", ".hair", {}),
-    ("data", "data", ".data", {}),
-    ("ply-binary", "ply", ".ply", {}),
-    ("ply-ascii", "ply", ".ply", {"ascii": True}),
-    ("obj", "obj", ".obj", {}),
-    ("tfx-v4", "tfx", ".tfx", {"version": 4.0}),
-    ("tfx-v3", "tfx", ".tfx", {"version": 3.0}),
-    ("tfx-v2-ascii", "tfx", ".tfx", {"version": 2.0}),
-    ("usdc", "usd", ".usdc", {}),
-    ("usda", "usd", ".usda", {}),
-    ("thair", "thair", ".thair.npz", {}),
+    ("hair", "hair", ".hair", {}, {}),
+    ("data", "data", ".data", {}, {}),
+    ("ply-binary", "ply", ".ply", {}, {}),
+    ("ply-ascii", "ply", ".ply", {"ascii": True}, {}),
+    ("obj", "obj", ".obj", {}, {}),
+    ("tfx-v4", "tfx", ".tfx", {"version": 4.0}, {}),
+    ("tfx-v3", "tfx", ".tfx", {"version": 3.0}, {}),
+    ("tfx-v2-ascii", "tfx", ".tfx", {"version": 2.0}, {}),
+    ("usdc", "usd", ".usdc", {}, {}),  # the default read: usd-core in a child process
+    ("usdc-inproc", "usd", ".usdc", {}, {"isolate": False}),
+    ("usda", "usd", ".usda", {}, {}),
+    ("thair", "thair", ".thair.npz", {}, {}),
 ]
 
 
@@ -87,7 +90,7 @@ def main(argv=None) -> int:
     tmp = tempfile.mkdtemp(prefix="bench_io_", dir=args.tmp)
     rows = []
     try:
-        for label, fmt, ext, opts in CASES:
+        for label, fmt, ext, opts, load_opts in CASES:
             if args.formats and label not in args.formats:
                 continue
             if fmt == "usd" and not have_usd:
@@ -103,7 +106,7 @@ def main(argv=None) -> int:
             def load():
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    loaded[:] = [load_groom(path, format=fmt)]
+                    loaded[:] = [load_groom(path, format=fmt, **load_opts)]
 
             t_load = best_time(load, repeat)
             g = loaded[0]
