@@ -23,7 +23,9 @@ tfxmesh    .tfxmesh                    no     TressFX collision mesh:
 
 Every reader raises :class:`GroomFormatError` (a ``ValueError``) for a bad file,
 checking counts against the file size before allocating; every writer writes a
-temporary file in the target's directory and renames it into place.
+temporary file in the target's directory and renames it into place.  USD files
+are read by usd-core in a child process (``isolate=False`` to read in-process),
+because usd-core can crash or exhaust memory on a corrupt binary file.
 """
 
 from __future__ import annotations

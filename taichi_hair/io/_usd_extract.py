@@ -15,9 +15,16 @@ Exit codes: 0 written; 3 USD reported an error (message on stderr after
 
 from __future__ import annotations
 
+import sys
+
+if __name__ == "__main__":  # run as a script: keep this folder's modules (ply.py...) from shadowing others
+    import os as _os
+
+    _here = _os.path.dirname(_os.path.abspath(__file__))
+    sys.path[:] = [p for p in sys.path if _os.path.abspath(p or ".") != _here]
+
 import json
 import os
-import sys
 import tempfile
 
 import numpy as np
