@@ -41,7 +41,13 @@ def _vec(name, v):
     return a
 
 
-def _check_common(owner, body, friction):
+def _check_common(owner, body, friction, strands=None):
+    if strands is not None:
+        ok = (isinstance(strands, (tuple, list)) and len(strands) == 2
+              and all(isinstance(v, (int, np.integer)) for v in strands) and 0 <= strands[0] < strands[1])
+        if not ok:
+            raise ValueError(f"{owner}.strands must be None or a range (first, last + 1) of strand indices, "
+                             f"got {strands!r}")
     if not (isinstance(body, (int, np.integer)) and body >= -1):
         raise ValueError(f"{owner}.body must be an integer >= -1 (-1: static world), got {body!r}")
     if not (math.isfinite(friction) and friction >= 0):
@@ -57,12 +63,15 @@ class PlaneCollider:
         normal: outward normal in the body frame (normalised here) [-].
         friction: Coulomb coefficient mu against hair [-].
         body: body index in Control, -1 for the static world [-].
+        strands: optional half-open range (first, last + 1) of the strands this collider
+            acts on (a collision group); ``None``: all strands.
     """
 
     point: tuple = (0.0, 0.0, 0.0)
     normal: tuple = (0.0, 1.0, 0.0)
     friction: float = 0.3
     body: int = -1
+    strands: tuple = None
 
     def __post_init__(self):
         self.point = _vec("PlaneCollider.point", self.point)
@@ -70,41 +79,45 @@ class PlaneCollider:
         if np.linalg.norm(n) < 1e-12:
             raise ValueError("PlaneCollider.normal must be non-zero")
         self.normal = n / np.linalg.norm(n)
-        _check_common("PlaneCollider", self.body, self.friction)
+        _check_common("PlaneCollider", self.body, self.friction, self.strands)
 
 
 @dataclass
 class SphereCollider:
-    """Sphere of ``radius`` [m] centred at ``center`` (body frame) [m]; friction mu [-]; body index."""
+    """Sphere of ``radius`` [m] centred at ``center`` (body frame) [m]; friction mu [-]; body index;
+    optional strand range (see PlaneCollider)."""
 
     center: tuple = (0.0, 0.0, 0.0)
     radius: float = 0.1
     friction: float = 0.3
     body: int = -1
+    strands: tuple = None
 
     def __post_init__(self):
         self.center = _vec("SphereCollider.center", self.center)
         if not (math.isfinite(self.radius) and self.radius > 0):
             raise ValueError(f"SphereCollider.radius must be a finite positive number, got {self.radius!r}")
-        _check_common("SphereCollider", self.body, self.friction)
+        _check_common("SphereCollider", self.body, self.friction, self.strands)
 
 
 @dataclass
 class CapsuleCollider:
-    """Capsule: points within ``radius`` [m] of the segment p0-p1 (body frame) [m]; friction; body."""
+    """Capsule: points within ``radius`` [m] of the segment p0-p1 (body frame) [m]; friction; body;
+    optional strand range (see PlaneCollider)."""
 
     p0: tuple = (0.0, 0.0, 0.0)
     p1: tuple = (0.0, 0.1, 0.0)
     radius: float = 0.05
     friction: float = 0.3
     body: int = -1
+    strands: tuple = None
 
     def __post_init__(self):
         self.p0 = _vec("CapsuleCollider.p0", self.p0)
         self.p1 = _vec("CapsuleCollider.p1", self.p1)
         if not (math.isfinite(self.radius) and self.radius > 0):
             raise ValueError(f"CapsuleCollider.radius must be a finite positive number, got {self.radius!r}")
-        _check_common("CapsuleCollider", self.body, self.friction)
+        _check_common("CapsuleCollider", self.body, self.friction, self.strands)
 
 
 @dataclass
@@ -119,6 +132,7 @@ class MeshCollider:
             thickness is used as signed distance [m].
         friction: Coulomb coefficient mu against hair [-].
         body: body index in Control, -1 for the static world [-].
+        strands: optional strand range (see PlaneCollider).
     """
 
     mesh: object = None
@@ -127,6 +141,7 @@ class MeshCollider:
     thickness: float = 1e-3
     friction: float = 0.3
     body: int = -1
+    strands: tuple = None
     #: Filled at build time: the SDF grid (res, res, res) [m], its origin [m] and spacing [m].
     sdf: np.ndarray = field(default=None, repr=False)
     origin: np.ndarray = field(default=None, repr=False)
@@ -134,7 +149,7 @@ class MeshCollider:
     watertight: bool = True
 
     def __post_init__(self):
-        _check_common("MeshCollider", self.body, self.friction)
+        _check_common("MeshCollider", self.body, self.friction, self.strands)
         if not (isinstance(self.resolution, int) and 8 <= self.resolution <= 512):
             raise ValueError(f"MeshCollider.resolution must be an integer in [8, 512], got {self.resolution!r}")
         if not (math.isfinite(self.thickness) and self.thickness > 0):
@@ -219,6 +234,8 @@ class ColliderSet:
         self.collider_b = ti.Vector.field(3, float, nc)
         self.collider_radius = ti.field(float, nc)
         self.collider_grid = ti.Vector.field(2, ti.i32, nc)
+        #: Strands the collider acts on: half-open range [first, last + 1) [-].
+        self.collider_strands = ti.Vector.field(2, ti.i32, nc)
         grids = [c.sdf for c in colliders if isinstance(c, MeshCollider)]
         total = sum(int(g.size) for g in grids)
         self.sdf_value = ti.field(float, max(total, 1))
@@ -238,9 +255,12 @@ class ColliderSet:
         b = np.zeros((nc, 3))
         rad = np.zeros(nc)
         grid = np.zeros((nc, 2), np.int32)
+        strands = np.tile(np.array([0, 2**31 - 1], np.int32), (nc, 1))
         flat, off = [], 0
         for k, c in enumerate(colliders):
             body[k], fr[k] = c.body, c.friction
+            if c.strands is not None:
+                strands[k] = c.strands
             if isinstance(c, PlaneCollider):
                 kind[k], a[k], b[k] = PLANE, c.point, c.normal
             elif isinstance(c, SphereCollider):
@@ -259,6 +279,7 @@ class ColliderSet:
         self.collider_b.from_numpy(b.astype(f))
         self.collider_radius.from_numpy(rad.astype(f))
         self.collider_grid.from_numpy(grid)
+        self.collider_strands.from_numpy(strands)
         if flat:
             self.sdf_value.from_numpy(np.concatenate(flat).astype(f))
 
@@ -358,6 +379,12 @@ def collider_distance(cs: ti.template(), c: ti.i32, p):
     else:
         d, n = mesh_distance(cs, c, p)
     return d, n
+
+
+@ti.func
+def acts_on(cs: ti.template(), c: ti.i32, strand: ti.i32) -> bool:
+    rng = cs.collider_strands[c]
+    return rng[0] <= strand and strand < rng[1]
 
 
 @ti.func

@@ -30,7 +30,7 @@ contact is ever dropped silently.
 
 import taichi as ti
 
-from .colliders import body_transform, collider_distance
+from .colliders import acts_on, body_transform, collider_distance
 from .grid import segment_closest_points
 
 vec3 = ti.math.vec3
@@ -66,10 +66,11 @@ def count_contacts(vertex: ti.template(), x: ti.template(), radius: ti.template(
         nb = 0
         if vertex.vertex_is_fixed[a] == 0:
             for k in range(cs.count_field[None]):
-                R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[k])
-                d, n = collider_distance(cs, k, R.transpose() @ (x[a] - T))
-                if d < radius[a] + margin:
-                    nb += 1
+                if acts_on(cs, k, vertex.vertex_strand[a]):
+                    R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[k])
+                    d, n = collider_distance(cs, k, R.transpose() @ (x[a] - T))
+                    if d < radius[a] + margin:
+                        nb += 1
         grid.vertex_body_emit_count[a] = nb
     # Exclusive prefix sums in place (serial; one pass over the vertices); entry n gets the total.
     ti.loop_config(serialize=True)
@@ -122,7 +123,7 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
                 R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, body)
                 q = R.transpose() @ (x[a] - T)
                 d, nq = collider_distance(cs, k, q)
-                if d < radius[a] + margin:
+                if d < radius[a] + margin and acts_on(cs, k, vertex.vertex_strand[a]):
                     if cb < cap:
                         Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, body)
                         s_end = Re @ (q - d * nq) + Te

@@ -77,7 +77,9 @@ def begin_projection(x: ti.template(), con: ti.template()):
         if iw > 0.0:
             for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
                 c = con.vertex_contact_list[e]
-                z += (iw * _weight_of(con, c, i) / con.contact_delassus[c]) * con.contact_accumulated[c]
+                dh = con.contact_delassus[c]
+                if dh > 0.0:
+                    z += (iw * _weight_of(con, c, i) / dh) * con.contact_accumulated[c]
         else:
             z = x[i]
         con.vertex_z[i] = z
@@ -130,8 +132,9 @@ def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.temp
             dz = vec3(0.0)
             for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
                 c = con.vertex_contact_list[e]
-                if c % 8 == batch:
-                    dz += (_weight_of(con, c, i) / con.contact_delassus[c]) * con.contact_delta[c]
+                dh = con.contact_delassus[c]
+                if c % 8 == batch and dh > 0.0:
+                    dz += (_weight_of(con, c, i) / dh) * con.contact_delta[c]
             z[i] += iw * dz
 
 

@@ -102,3 +102,79 @@ def nod_rotation(scene: HangScene, time: float) -> np.ndarray:
     a = scene.nod_amplitude * math.sin(2 * math.pi * time / scene.nod_period)
     c, s = math.cos(a), math.sin(a)
     return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+# --------------------------------------------------------------------------- hairball (Daviet 2023 Sec. 5.2)
+@dataclass
+class HairballScene:
+    """The "hairy ball" of Daviet 2023 Sec. 5.2 (after Daviet 2020 and Kaufman et al. 2014).
+
+    Attributes:
+        strands: number of strands planted on the top half of the ball [-].
+        length: strand length L [m] (30 cm in the paper).
+        radius: strand radius R [m] (0.037 mm).
+        edge_length: rest edge length [m] (1 cm: 30 edges per strand, as the paper's 480k vertices for 16k).
+        ball_radius: radius of the ball [m] (9 cm).
+        friction: hair-hair and hair-ball friction mu [-] (0.2).
+        helix_radius, helix_pitch: natural curl [m] (0.5 cm, 5 cm).
+        seed: random seed for the curl phases.
+    """
+
+    strands: int = 1000
+    length: float = 0.30
+    radius: float = 3.7e-5
+    edge_length: float = 0.01
+    ball_radius: float = 0.09
+    friction: float = 0.2
+    helix_radius: float = 0.005
+    helix_pitch: float = 0.05
+    seed: int = 0
+
+    def __post_init__(self):
+        if not (isinstance(self.strands, int) and self.strands >= 1):
+            raise ValueError(f"HairballScene.strands must be an integer >= 1, got {self.strands!r}")
+        for name in ("length", "radius", "edge_length", "ball_radius", "helix_pitch"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"HairballScene.{name} must be a finite positive number, got {v!r}")
+        if not (math.isfinite(self.friction) and self.friction >= 0):
+            raise ValueError(f"HairballScene.friction must be >= 0, got {self.friction!r}")
+
+
+def build_hairball(scene: HairballScene):
+    """Model of the hairball: strands along the normals of the upper hemisphere, clamped to body 0."""
+    rng = np.random.default_rng(scene.seed)
+    material = RodMaterial(radius=scene.radius)
+    normals = -_fibonacci_lower_cap(scene.strands, 0.0)  # the lower cap y <= 0, mirrored to the top half
+    n = max(3, int(round(scene.length / scene.edge_length)) + 1)
+    b = GroomBuilder()
+    for nrm in normals:
+        root = scene.ball_radius * nrm
+        pts = root + strand_along(nrm, scene.length, n, scene.helix_radius, scene.helix_pitch,
+                                  rng.uniform(0, 2 * np.pi))
+        b.add_strand(pts, material)
+    return b.finalize()
+
+
+def _axis_rotation(axis, angle: float) -> np.ndarray:
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def hairball_rotation(time: float) -> np.ndarray:
+    """Rotation of the ball at ``time`` [s].
+
+    The papers give the sequence of Kaufman et al. 2014 only as a video; this
+    is our reading of it, written down: 0.5 s at rest, a full turn about the
+    vertical axis in 1.5 s (smooth start and stop), a 90 degree roll about the
+    horizontal x axis and back (1 s each), then a half turn about the vertical
+    axis in 0.75 s, then rest.  Smoothstep profiles keep the accelerations finite.
+    """
+    def smooth(t0, t1):
+        u = min(max((time - t0) / (t1 - t0), 0.0), 1.0)
+        return u * u * (3 - 2 * u)
+
+    yaw = 2 * math.pi * smooth(0.5, 2.0) + math.pi * smooth(4.0, 4.75)
+    roll = 0.5 * math.pi * (smooth(2.0, 3.0) - smooth(3.0, 4.0))
+    return _axis_rotation((0, 1, 0), yaw) @ _axis_rotation((1, 0, 0), roll)
