@@ -1,0 +1,1104 @@
+"""Physics-based grooming without a window (Daviet 2023, Sec. 5.3).
+
+A :class:`GroomingSession` holds a groom (:class:`taichi_hair.io.Groom`: the
+current pose ``points`` and the rest pose ``rest_points``) inside a running
+*quasistatic* simulation: each :meth:`~GroomingSession.advance` frame runs a
+few ADMM iterations (``GroomingConfig.iterations``, 10 in the paper) of
+:class:`SolverADMM` in ``mode="quasistatic"`` with proximity-only contacts
+(``velocity_margin=0``), so the groom settles under gravity, elasticity and
+contacts while it is edited.  As in the paper only a fraction of the strands
+(``guide_ratio``) is simulated; the others follow by linear blend skinning
+(:mod:`taichi_hair.skinning`).
+
+Editing actions are methods, each logged with its parameters (``session.log``,
+written by :meth:`~GroomingSession.write_log` as ``session.json`` and replayed
+by :meth:`~GroomingSession.replay`):
+
+* selection: :meth:`select` (a sphere), :meth:`select_ray` (a screen ray: a
+  cylinder of the given radius around a half-line), :meth:`select_strands`,
+  :meth:`select_all`.  An edge within the radius selects both its vertices;
+  a strand is selected when any of its vertices is.  ``mode`` is "replace",
+  "add" or "remove".
+* :meth:`drag` -- direct manipulation.  The solver has no per-vertex external
+  force, so a drag makes the grabbed vertices *kinematic* (``vertex_is_fixed``
+  of the Model, the mechanism that clamps roots) and, every frame before the
+  step, moves their prescribed position a fraction ``stiffness`` of the way to
+  the moving target (anchor + ``target_offset``): an overdamped spring seen
+  frame by frame, with time constant -1/ln(1 - stiffness) frames.  The rest of
+  each strand follows through elasticity and contacts.  :meth:`release` ends it.
+* :meth:`trim` cuts the strands whose *current* polyline crosses a plane (the
+  cut seen on screen); the same edge and edge parameter cut the rest pose.
+* :meth:`scale_length` shortens (cut at the scaled rest arc length) or grows
+  selected strands from the tip; growth continues the tip's discrete
+  curvature and torsion (the screw motion taking the last-but-one edge pair to
+  the last one), at the last rest edge length.
+* :meth:`scale_curl` multiplies the rest turning angle of every edge pair of
+  the selected strands (the Bishop-frame curvature), keeping edge lengths and
+  the root edge; 0 straightens.  The edited strands' current pose becomes the
+  new rest pose and settles again when simulated.
+* :meth:`pin` / :meth:`unpin` make the selected vertices kinematic where they
+  are (``Groom.pinned``); :meth:`set_parameter` changes a
+  :class:`GroomingConfig` field; :meth:`simulate` toggles the simulation.
+
+Every edit is undoable (:meth:`undo`, :meth:`redo`): a snapshot of the groom
+(both poses, topology, attributes), the parameters, the selection and the drag
+is taken before it, so undo and redo restore the groom bit for bit.  The
+solver's warm-start state (twists, multipliers) restarts from the restored
+groom, as after loading it.
+
+Topology or rest-pose changes (trim, scale_length, scale_curl, material
+parameters) rebuild the Model and solver *lazily*, at the next frame, so a
+burst of edits costs one rebuild.  A rebuild recompiles every Taichi kernel
+(kernels are specialised per field); ``session.timings`` records the rebuild
+and first-frame times (on a shared 2-core CPU, 12 strands x 10 vertices:
+about 2 s to build and 7 s (no contacts) to 20 s (contacts) for the first
+frame, against 4 to 20 ms for a later frame).
+
+Points on a guide strand are written back from the solver's State, whose
+precision is Taichi's ``default_fp``; the groom keeps its own dtype.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import time
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+
+from .io import Groom, load_groom, save_groom
+
+MODES = ("replace", "add", "remove")
+#: Actions that change the groom or the simulation set-up: each pushes an undo snapshot.
+EDIT_ACTIONS = ("drag", "release", "trim", "scale_length", "scale_curl", "pin", "unpin", "set_parameter")
+#: Every action a session log may hold (each is a method of :class:`GroomingSession`).
+ACTIONS = ("select", "select_ray", "select_strands", "select_all", "simulate", "advance", "undo", "redo") \
+    + EDIT_ACTIONS
+#: Parameters whose change rebuilds the Model and solver (the others apply to the running solver).
+REBUILD_PARAMETERS = ("youngs_modulus", "radius", "density", "guide_ratio", "neighbour_count", "seed", "contacts",
+                      "contact_margin", "w0")
+# A cut closer than this fraction of an edge to its first vertex drops that vertex instead of
+# leaving a very short last edge (short edges slow ADMM down, Sec. 6.1).
+_MIN_EDGE_FRACTION = 0.25
+
+
+# =========================================================================== configuration
+def _finite(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass
+class GroomingConfig:
+    """Parameters of a :class:`GroomingSession` (validated; errors name the field).
+
+    Attributes:
+        youngs_modulus: Young modulus E of the hair, bending and stretching [Pa].
+        radius: strand radius R [m] (every strand; the groom's own radius attribute is kept, not simulated).
+        density: volumetric mass rho [kg/m^3].
+        friction: hair-hair Coulomb coefficient mu [-] (colliders keep their own ``friction``).
+        gravity: external acceleration g, 3 components [m/s^2].
+        iterations: ADMM iterations per frame [-] (10 in the paper).
+        guide_ratio: fraction of the strands simulated, in (0, 1] [-] (10 % in the paper); the
+            others follow their guides by linear blend skinning.
+        neighbour_count: guides each skinned strand follows [-].
+        seed: seed of the guide selection [-].
+        contacts: hair-hair proximity contacts on or off.
+        contact_margin: proximity margin of the contact detection [m].
+        w0: scale of the ADMM elasticity weights [-] (SolverADMMConfig.w0).  0.2 settles a
+            quasistatic groom within about ten 10-iteration frames where the dynamic default 25
+            still creeps after 200 (12 strands x 10 vertices, 10 cm, measured).
+        autosave_every: write the autosave files every this many edits; 0 disables [-].
+        undo_limit: most undo snapshots kept [-].
+    """
+
+    youngs_modulus: float = 3.0e9
+    radius: float = 5.0e-5
+    density: float = 1300.0
+    friction: float = 0.2
+    gravity: tuple = (0.0, -9.81, 0.0)
+    iterations: int = 10
+    guide_ratio: float = 0.1
+    neighbour_count: int = 4
+    seed: int = 0
+    contacts: bool = True
+    contact_margin: float = 1.0e-4
+    w0: float = 0.2
+    autosave_every: int = 1
+    undo_limit: int = 100
+
+    def __post_init__(self):
+        for name in ("youngs_modulus", "radius", "density", "w0"):
+            v = getattr(self, name)
+            if not (_finite(v) and v > 0):
+                raise ValueError(f"GroomingConfig.{name} must be a finite positive number, got {v!r}")
+            setattr(self, name, float(v))
+        for name in ("friction", "contact_margin"):
+            v = getattr(self, name)
+            if not (_finite(v) and v >= 0):
+                raise ValueError(f"GroomingConfig.{name} must be a finite number >= 0, got {v!r}")
+            setattr(self, name, float(v))
+        try:
+            g = tuple(float(c) for c in self.gravity)
+        except (TypeError, ValueError):
+            g = ()
+        if len(g) != 3 or not all(math.isfinite(c) for c in g):
+            raise ValueError(f"GroomingConfig.gravity must be 3 finite numbers [m/s^2], got {self.gravity!r}")
+        self.gravity = g
+        for name, lo in (("iterations", 1), ("neighbour_count", 1), ("autosave_every", 0), ("undo_limit", 0),
+                         ("seed", 0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
+                raise ValueError(f"GroomingConfig.{name} must be an integer >= {lo}, got {v!r}")
+            setattr(self, name, int(v))
+        if not (_finite(self.guide_ratio) and 0.0 < self.guide_ratio <= 1.0):
+            raise ValueError(f"GroomingConfig.guide_ratio must lie in (0, 1], got {self.guide_ratio!r}")
+        self.guide_ratio = float(self.guide_ratio)
+        if not isinstance(self.contacts, (bool, np.bool_)):
+            raise ValueError(f"GroomingConfig.contacts must be true or false, got {self.contacts!r}")
+        self.contacts = bool(self.contacts)
+
+    def to_dict(self) -> dict:
+        """JSON-able dict of the fields (gravity as a list)."""
+        d = asdict(self)
+        d["gravity"] = list(self.gravity)
+        return d
+
+
+# =========================================================================== geometry helpers (NumPy, float64)
+def _vec3(name: str, value) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"'{name}' must be 3 finite numbers, got {value!r}")
+    return a
+
+
+def _positive(name: str, value, allow_zero: bool = False) -> float:
+    if not _finite(value) or value < 0 or (value == 0 and not allow_zero):
+        raise ValueError(f"'{name}' must be a finite {'non-negative' if allow_zero else 'positive'} number, "
+                         f"got {value!r}")
+    return float(value)
+
+
+def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues rotation of v about unit ``axis`` by ``angle`` [rad]."""
+    c, s = math.cos(angle), math.sin(angle)
+    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1.0 - c)
+
+
+def _perpendicular(t: np.ndarray) -> np.ndarray:
+    a = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    d = np.cross(t, a)
+    return d / np.linalg.norm(d)
+
+
+def _pair_frame(t0: np.ndarray, t1: np.ndarray):
+    """Orthonormal frame (columns) from a unit tangent t0 and the next tangent t1, or None if parallel."""
+    n = t1 - np.dot(t1, t0) * t0
+    ln = np.linalg.norm(n)
+    if ln < 1e-9:
+        return None
+    n /= ln
+    return np.column_stack([t0, n, np.cross(t0, n)])
+
+
+def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotation matrix taking unit a to unit b."""
+    v = np.cross(a, b)
+    c = float(np.dot(a, b))
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else _rotation_matrix(_perpendicular(a), math.pi)
+    k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + k + k @ k / (1.0 + c)
+
+
+def _rotation_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
+    return np.column_stack([_rotate(e, axis, angle) for e in np.eye(3)])
+
+
+def _tangents(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    e = np.diff(p, axis=0)
+    le = np.linalg.norm(e, axis=1)
+    return e / le[:, None], le
+
+
+def _tip_rotation(p: np.ndarray) -> np.ndarray:
+    """Rotation continuing the tip of polyline p: maps (t[-3], t[-2]) to (t[-2], t[-1]) (a screw for a helix)."""
+    t, _ = _tangents(p)
+    if len(t) >= 3:
+        a, b = _pair_frame(t[-3], t[-2]), _pair_frame(t[-2], t[-1])
+        if a is not None and b is not None:
+            return b @ a.T
+    return _min_rotation(t[-2], t[-1])
+
+
+def _tip_frame_map(rest: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Rotation taking the rest tip frame (last two edges) to the current one."""
+    tr, _ = _tangents(rest[-3:])
+    tc, _ = _tangents(cur[-3:])
+    fr, fc = _pair_frame(tr[0], tr[1]), _pair_frame(tc[0], tc[1])
+    if fr is not None and fc is not None:
+        return fc @ fr.T
+    return _min_rotation(tr[1], tc[1])
+
+
+def _cut(cur: np.ndarray, rest: np.ndarray, j: int, u: float):
+    """Cut both poses on edge j at parameter u in (0, 1].
+
+    Returns (current, rest, source, fresh): ``source`` is the old vertex each new vertex takes
+    its attributes from, ``fresh`` marks new positions.  Keeps at least 3 vertices; a cut within
+    the first quarter of edge j (j >= 2) moves vertex j onto the cut instead of leaving a short
+    last edge; a cut on the root edge (j = 0) splits what is left of it in two.
+    """
+    cc = cur[j] + u * (cur[j + 1] - cur[j])
+    rc = rest[j] + u * (rest[j + 1] - rest[j])
+    if j == 0:
+        return (np.array([cur[0], 0.5 * (cur[0] + cc), cc]), np.array([rest[0], 0.5 * (rest[0] + rc), rc]),
+                np.array([0, 1, 1]), np.array([False, True, True]))
+    keep = j if (u < _MIN_EDGE_FRACTION and j >= 2) else j + 1
+    src = np.r_[np.arange(keep), j if u < 0.5 else j + 1]
+    fresh = np.r_[np.zeros(keep, dtype=bool), True]
+    return np.vstack([cur[:keep], cc]), np.vstack([rest[:keep], rc]), src, fresh
+
+
+def _arc_cut(rest: np.ndarray, length: float) -> tuple[int, float]:
+    """Edge j and parameter u where the rest arc length reaches ``length`` (< total)."""
+    _, le = _tangents(rest)
+    cum = np.r_[0.0, np.cumsum(le)]
+    j = int(np.searchsorted(cum, length, side="left")) - 1
+    j = min(max(j, 0), len(le) - 1)
+    u = (length - cum[j]) / le[j]
+    return j, float(min(max(u, 1e-12), 1.0))
+
+
+def _turning(p: np.ndarray):
+    """Bishop-frame curvature of a polyline: (angle, axis components (a.u, a.v)) per edge pair."""
+    t, le = _tangents(p)
+    u = _perpendicular(t[0])
+    angles, comps = [], []
+    for i in range(1, len(t)):
+        b = np.cross(t[i - 1], t[i])
+        s, c = np.linalg.norm(b), float(np.dot(t[i - 1], t[i]))
+        v = np.cross(t[i - 1], u)
+        if s < 1e-14:
+            angles.append(0.0)
+            comps.append((1.0, 0.0))
+        else:
+            a = b / s
+            angles.append(math.atan2(s, c))
+            comps.append((float(np.dot(a, u)), float(np.dot(a, v))))
+            u = _rotate(u, a, angles[-1])
+            u -= np.dot(u, t[i]) * t[i]
+            u /= np.linalg.norm(u)
+    return t, le, np.array(angles), np.array(comps)
+
+
+def _scale_curl_polyline(p: np.ndarray, factor: float) -> np.ndarray:
+    """Polyline with every Bishop turning angle multiplied by ``factor`` (edge lengths and root edge kept)."""
+    t, le, angles, comps = _turning(p)
+    out = np.empty_like(p)
+    out[0], out[1] = p[0], p[1]
+    ti_, u = t[0].copy(), _perpendicular(t[0])
+    for i in range(1, len(t)):
+        v = np.cross(ti_, u)
+        a = comps[i - 1][0] * u + comps[i - 1][1] * v
+        na = np.linalg.norm(a)
+        if angles[i - 1] != 0.0 and na > 0:
+            a /= na
+            ti_ = _rotate(ti_, a, factor * angles[i - 1])
+            u = _rotate(u, a, factor * angles[i - 1])
+            ti_ /= np.linalg.norm(ti_)
+            u -= np.dot(u, ti_) * ti_
+            u /= np.linalg.norm(u)
+        out[i + 1] = out[i] + le[i] * ti_
+    return out
+
+
+def _edge_mask(offsets: np.ndarray, n: int) -> np.ndarray:
+    """True for edge k (vertices k, k+1) when both lie on the same strand, shape (n - 1,)."""
+    m = np.ones(max(n - 1, 0), dtype=bool)
+    m[offsets[1:-1] - 1] = False
+    return m
+
+
+# =========================================================================== session log parsing
+def _parse_log(source) -> list:
+    """Entries of a session log (a list, or a JSON file) as (entry, line or None)."""
+    if isinstance(source, (list, tuple)):
+        return [(e, None) for e in source]
+    path = os.fspath(source)
+    with open(path, "r", encoding="utf-8") as fh:
+        text = fh.read()
+    dec = json.JSONDecoder()
+    pos = len(text) - len(text.lstrip())
+    if not text[pos:pos + 1] == "[":
+        raise ValueError(f"{path}: line {text.count(chr(10), 0, pos) + 1}: a session log is a JSON list")
+    pos += 1
+    out = []
+    while True:
+        while pos < len(text) and text[pos] in " \t\r\n,":
+            pos += 1
+        line = text.count("\n", 0, pos) + 1
+        if pos >= len(text):
+            raise ValueError(f"{path}: line {line}: unterminated JSON list")
+        if text[pos] == "]":
+            return out
+        try:
+            entry, pos = dec.raw_decode(text, pos)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: line {exc.lineno}, entry {len(out)}: invalid JSON ({exc.msg})") from None
+        out.append((entry, line))
+
+
+# =========================================================================== the session
+class GroomingSession:
+    """A groom being edited inside a running quasistatic simulation (Sec. 5.3), GUI-free.
+
+    Args:
+        groom: a :class:`taichi_hair.io.Groom` (lengths in metres; its ``rest_points`` is the
+            rest pose, else ``points``) or a list of (m, 3) polylines (m >= 3).  Copied;
+            ``point_frames`` (an animation cache) is dropped.
+        config: :class:`GroomingConfig`; default: the groom's ``params["grooming"]`` if it has
+            one (as :meth:`save` writes), else the defaults.
+        colliders: body colliders for the solver (PlaneCollider, SphereCollider, ...); they are
+            scene objects, not part of the log, so a replay needs the same ones.
+        autosave_path: where :meth:`autosave` writes the groom (native ``.thair.npz``); the log
+            goes beside it as ``<name>.session.json``.  None disables autosave.
+
+    Attributes:
+        groom: the edited :class:`Groom` (``points`` current pose, ``rest_points`` rest pose,
+            ``pinned``); replaced, never mutated in place, by edits.
+        config: the current :class:`GroomingConfig`.
+        simulating: whether :meth:`advance` steps the solver.
+        log: list of ``{"action": name, **params}`` of every action so far.
+        timings: lists of seconds: ``rebuild`` (Model + solver + skinning + State),
+            ``first_frame`` (first frame after a rebuild: kernel compilation), ``frame``.
+        rebuild_count: Models built so far [-].
+    """
+
+    def __init__(self, groom, config: GroomingConfig | None = None, colliders=None, autosave_path=None):
+        if not isinstance(groom, Groom):
+            groom = Groom.from_polylines([np.asarray(p, dtype=np.float64) for p in groom], units="m")
+        g = groom.copy().validate()
+        g.point_frames = None
+        g.frame_times = None
+        if g.rest_points is None:
+            g.rest_points = g.points.copy()
+        if g.pinned is None:
+            g.pinned = np.zeros(g.vertex_count, dtype=bool)
+        counts = g.strand_vertex_counts()
+        short = np.nonzero(counts < 3)[0]
+        if short.size:
+            raise ValueError(f"GroomingSession: strand {int(short[0])} has {int(counts[short[0]])} vertices; "
+                             "a simulated strand needs at least 3")
+        if config is None:
+            stored = g.params.get("grooming")
+            try:
+                config = GroomingConfig(**stored) if isinstance(stored, dict) else GroomingConfig()
+            except TypeError as exc:
+                raise ValueError(f"GroomingSession: params['grooming'] of the groom: {exc}") from None
+        elif not isinstance(config, GroomingConfig):
+            raise ValueError(f"GroomingSession: config must be a GroomingConfig, got {type(config).__name__}")
+        self.groom = g
+        self.config = replace(config)
+        self.colliders = list(colliders) if colliders else []
+        self.autosave_path = None if autosave_path is None else os.fspath(autosave_path)
+        self.simulating = True
+        self.log: list[dict] = []
+        self.timings = {"rebuild": [], "first_frame": [], "frame": []}
+        self.rebuild_count = 0
+        self._selection = np.zeros(g.vertex_count, dtype=bool)
+        self._drag = None
+        self._undo: list[dict] = []
+        self._redo: list[dict] = []
+        self._edits_since_autosave = 0
+        self._sim = None  # built lazily by _ensure_built
+        self._proxy_cache = None
+
+    @classmethod
+    def open(cls, path, config: GroomingConfig | None = None, colliders=None, autosave: bool = True, **options):
+        """Load a groom file (``taichi_hair.io.load_groom``) and autosave beside it
+        (``<stem>.autosave.thair.npz`` and ``<stem>.autosave.session.json``)."""
+        groom = load_groom(path, **options)
+        auto = None
+        if autosave:
+            base = os.fspath(path)
+            for ext in (".thair.npz", ".npz"):
+                if base.lower().endswith(ext):
+                    base = base[: -len(ext)]
+                    break
+            else:
+                base = os.path.splitext(base)[0]
+            auto = base + ".autosave.thair.npz"
+        return cls(groom, config, colliders, auto)
+
+    # ------------------------------------------------------------------ read-only views
+    @property
+    def strand_count(self) -> int:
+        return self.groom.strand_count
+
+    @property
+    def vertex_selection(self) -> np.ndarray:
+        """Selected vertices, bool, shape (vertex_count,) (a copy)."""
+        return self._selection.copy()
+
+    @property
+    def strand_selection(self) -> np.ndarray:
+        """Selected strands (any vertex selected), bool, shape (strand_count,)."""
+        return np.logical_or.reduceat(self._selection, self.groom.strand_offsets[:-1])
+
+    @property
+    def dragging(self) -> bool:
+        return self._drag is not None
+
+    # ------------------------------------------------------------------ log, undo, autosave machinery
+    def _record(self, action: str, **params) -> None:
+        self.log.append({"action": action, **params})
+
+    def _snapshot(self) -> dict:
+        drag = None if self._drag is None else {k: (v.copy() if isinstance(v, np.ndarray) else v)
+                                                for k, v in self._drag.items()}
+        return {"groom": self.groom.copy(), "config": replace(self.config), "selection": self._selection.copy(),
+                "drag": drag, "simulating": self.simulating}
+
+    def _edit(self, action: str, params: dict, apply) -> None:
+        """Run ``apply`` (which validates before it changes anything) as one undoable, logged edit."""
+        snap = self._snapshot()
+        apply()
+        self._undo.append(snap)
+        if len(self._undo) > self.config.undo_limit:
+            del self._undo[: len(self._undo) - self.config.undo_limit]
+        self._redo.clear()
+        self._record(action, **params)
+        self._count_edit()
+
+    def _count_edit(self) -> None:
+        self._edits_since_autosave += 1
+        every = self.config.autosave_every
+        if self.autosave_path is not None and every > 0 and self._edits_since_autosave >= every:
+            self.autosave()
+
+    def _restore(self, snap: dict) -> None:
+        old = self.groom, self.config
+        self.groom = snap["groom"].copy()
+        self.config = replace(snap["config"])
+        self._selection = snap["selection"].copy()
+        self._drag = None if snap["drag"] is None else {k: (v.copy() if isinstance(v, np.ndarray) else v)
+                                                        for k, v in snap["drag"].items()}
+        self.simulating = snap["simulating"]
+        same_rest = (np.array_equal(old[0].strand_offsets, self.groom.strand_offsets)
+                     and old[0].rest_points.dtype == self.groom.rest_points.dtype
+                     and np.array_equal(old[0].rest_points, self.groom.rest_points)
+                     and all(getattr(old[1], k) == getattr(self.config, k) for k in REBUILD_PARAMETERS))
+        if not same_rest:
+            self._invalidate()
+        elif self._sim is not None:
+            self._apply_live_parameters()
+            self._load_state()
+
+    def undo(self) -> None:
+        """Restore the groom, parameters, selection and drag as they were before the last edit."""
+        if not self._undo:
+            raise ValueError("undo: nothing to undo")
+        self._redo.append(self._snapshot())
+        self._restore(self._undo.pop())
+        self._record("undo")
+        self._count_edit()
+
+    def redo(self) -> None:
+        """Re-apply the last undone edit (restores exactly the state undo left)."""
+        if not self._redo:
+            raise ValueError("redo: nothing to redo")
+        self._undo.append(self._snapshot())
+        self._restore(self._redo.pop())
+        self._record("redo")
+        self._count_edit()
+
+    @property
+    def can_undo(self) -> bool:
+        return bool(self._undo)
+
+    @property
+    def can_redo(self) -> bool:
+        return bool(self._redo)
+
+    def _groom_for_saving(self) -> Groom:
+        g = self.groom.copy()
+        g.params["grooming"] = self.config.to_dict()
+        return g
+
+    def save(self, path) -> None:
+        """Write the edited groom (current pose, rest pose, pins, parameters in ``params["grooming"]``)
+        in the native ``.thair.npz`` format, atomically.  Not logged."""
+        save_groom(self._groom_for_saving(), path, format="thair")
+
+    def autosave(self) -> None:
+        """Write the groom to ``autosave_path`` and the log beside it, both atomically."""
+        if self.autosave_path is None:
+            raise ValueError("autosave: this session has no autosave_path")
+        self.save(self.autosave_path)
+        self.write_log(self.autosave_log_path)
+        self._edits_since_autosave = 0
+
+    @property
+    def autosave_log_path(self) -> str | None:
+        if self.autosave_path is None:
+            return None
+        base = self.autosave_path
+        for ext in (".thair.npz", ".npz"):
+            if base.lower().endswith(ext):
+                base = base[: -len(ext)]
+                break
+        return base + ".session.json"
+
+    def write_log(self, path) -> None:
+        """Write the log as a JSON list, one action per line (line i + 2 holds entry i), atomically."""
+        path = os.fspath(path)
+        text = "[\n" + ",\n".join(json.dumps(e, allow_nan=False) for e in self.log) + "\n]\n"
+        folder = os.path.dirname(os.path.abspath(path))
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".json", dir=folder)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+
+    def replay(self, source) -> None:
+        """Apply the actions of a session log (a list of dicts or a ``session.json`` path) in order.
+
+        Raises:
+            ValueError naming the entry index (and the file's line), the action and the problem,
+            for an unknown action, an unknown or missing parameter or a bad value.  Actions before
+            the bad one stay applied.
+        """
+        entries = _parse_log(source)
+        import inspect
+
+        for i, (entry, line) in enumerate(entries):
+            where = f"session entry {i}" + (f" (line {line})" if line is not None else "")
+            if not isinstance(entry, dict) or "action" not in entry:
+                raise ValueError(f"{where}: expected an object with an 'action' key, got {entry!r}")
+            name = entry["action"]
+            if name not in ACTIONS:
+                raise ValueError(f"{where}: unknown action {name!r}; known: {', '.join(ACTIONS)}")
+            params = {k: v for k, v in entry.items() if k != "action"}
+            method = getattr(self, name)
+            try:
+                inspect.signature(method).bind(**params)
+            except TypeError as exc:
+                raise ValueError(f"{where}, action {name!r}: bad parameters ({exc})") from None
+            try:
+                method(**params)
+            except ValueError as exc:
+                raise ValueError(f"{where}, action {name!r}: {exc}") from None
+
+    # ------------------------------------------------------------------ selection
+    def _apply_selection(self, hit: np.ndarray, mode: str) -> int:
+        if mode not in MODES:
+            raise ValueError(f"'mode' must be one of {MODES}, got {mode!r}")
+        if mode == "replace":
+            self._selection = hit
+        elif mode == "add":
+            self._selection = self._selection | hit
+        else:
+            self._selection = self._selection & ~hit
+        return int(self.strand_selection.sum())
+
+    def _edges(self):
+        p = self.groom.points.astype(np.float64)
+        mask = _edge_mask(self.groom.strand_offsets, p.shape[0])
+        k = np.nonzero(mask)[0]
+        return p, k, p[k], p[k + 1] - p[k]
+
+    def _hit_from_edges(self, p, k, close) -> np.ndarray:
+        hit = np.zeros(p.shape[0], dtype=bool)
+        hit[k[close]] = True
+        hit[k[close] + 1] = True
+        return hit
+
+    def select(self, center, radius, mode: str = "replace") -> int:
+        """Select the vertices of every edge within ``radius`` [m] of ``center`` [m]; returns the
+        number of selected strands."""
+        c = _vec3("center", center)
+        r = _positive("radius", radius)
+        p, k, a, u = self._edges()
+        s = np.clip(np.einsum("ij,ij->i", c - a, u) / np.einsum("ij,ij->i", u, u), 0.0, 1.0)
+        d = np.linalg.norm(a + s[:, None] * u - c, axis=1)
+        count = self._apply_selection(self._hit_from_edges(p, k, d <= r), mode)
+        self._record("select", center=c.tolist(), radius=r, mode=mode)
+        return count
+
+    def select_ray(self, origin, direction, radius, mode: str = "replace") -> int:
+        """Select the vertices of every edge within ``radius`` [m] of the half-line
+        origin + t direction, t >= 0 (a screen pick ray); returns the number of selected strands."""
+        o = _vec3("origin", origin)
+        dvec = _vec3("direction", direction)
+        nd = np.linalg.norm(dvec)
+        if nd == 0:
+            raise ValueError("'direction' must be a non-zero vector")
+        d = dvec / nd
+        r = _positive("radius", radius)
+        p, k, a, u = self._edges()
+        w = a - o
+        aa = np.einsum("ij,ij->i", u, u)
+        b = u @ d
+        dd = np.einsum("ij,ij->i", u, w)
+        e = w @ d
+
+        def dist(s, t, i=slice(None)):
+            return np.linalg.norm(w[i] + s[:, None] * u[i] - t[:, None] * d, axis=1)
+
+        # Convex in (s, t): the minimum over s in [0, 1], t >= 0 is interior or on a boundary.
+        best = dist(np.zeros_like(e), np.maximum(e, 0.0))
+        best = np.minimum(best, dist(np.ones_like(e), np.maximum(e + b, 0.0)))
+        best = np.minimum(best, dist(np.clip(-dd / aa, 0.0, 1.0), np.zeros_like(e)))
+        den = aa - b * b
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_in = (b * e - dd) / den
+        t_in = e + s_in * b
+        ok = np.nonzero((den > 1e-14 * aa) & (s_in >= 0) & (s_in <= 1) & (t_in >= 0))[0]
+        best[ok] = np.minimum(best[ok], dist(s_in[ok], t_in[ok], ok))
+        count = self._apply_selection(self._hit_from_edges(p, k, best <= r), mode)
+        self._record("select_ray", origin=o.tolist(), direction=dvec.tolist(), radius=r, mode=mode)
+        return count
+
+    def select_strands(self, strands, mode: str = "replace") -> int:
+        """Select whole strands by index."""
+        try:
+            idx = np.asarray(strands, dtype=np.int64).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"'strands' must be a list of strand indices, got {strands!r}") from None
+        ns = self.strand_count
+        if idx.size and (idx.min() < 0 or idx.max() >= ns):
+            raise ValueError(f"'strands' must lie in [0, {ns}), got {idx.tolist()}")
+        strand_hit = np.zeros(ns, dtype=bool)
+        strand_hit[idx] = True
+        count = self._apply_selection(np.repeat(strand_hit, self.groom.strand_vertex_counts()), mode)
+        self._record("select_strands", strands=idx.tolist(), mode=mode)
+        return count
+
+    def select_all(self) -> int:
+        self._selection = np.ones(self.groom.vertex_count, dtype=bool)
+        self._record("select_all")
+        return self.strand_count
+
+    # ------------------------------------------------------------------ topology edits
+    def _replace_strands(self, new: dict) -> None:
+        """Swap strands s -> (current, rest, source, fresh) (see :func:`_cut`; source is local to the strand).
+
+        Rebuilds every per-vertex array (points, rest, pinned, selection, per-vertex radius and
+        colour); unchanged strands are copied bit for bit.  Ends an active drag.
+        """
+        g = self.groom
+        off = g.strand_offsets
+        counts = g.strand_vertex_counts().copy()
+        src = []
+        for s in range(g.strand_count):
+            if s in new:
+                counts[s] = new[s][0].shape[0]
+                src.append(off[s] + np.asarray(new[s][2], dtype=np.int64))
+            else:
+                src.append(np.arange(off[s], off[s + 1]))
+        src = np.concatenate(src)
+        new_off = np.r_[0, np.cumsum(counts)].astype(np.int64)
+        pts = g.points[src].copy()
+        rest = g.rest_points[src].copy()
+        pinned = g.pinned[src].copy()
+        sel = self._selection[src].copy()
+        for s, (cur, rp, _, fresh) in new.items():
+            a, b = new_off[s], new_off[s + 1]
+            pts[a:b] = cur.astype(pts.dtype)
+            rest[a:b] = rp.astype(rest.dtype)
+            pinned[a:b][fresh] = False  # a cut point or a grown vertex is not pinned
+        ng = replace(g, points=pts, rest_points=rest, pinned=pinned, strand_offsets=new_off, params=dict(g.params))
+        if g.radius is not None and g.radius.shape[0] == g.vertex_count:
+            ng.radius = g.radius[src].copy()
+        if g.color is not None and g.color.shape[0] == g.vertex_count:
+            ng.color = g.color[src].copy()
+        self.groom = ng.validate()
+        self._selection = sel
+        self._drag = None
+        self._invalidate()
+
+    def trim(self, plane_point, plane_normal, selected_only: bool = False) -> int:
+        """Cut every strand whose current polyline crosses the plane (point, normal) [m]; the part
+        holding the root stays.  ``selected_only`` restricts it to the selected strands.  Strands
+        not crossing are untouched.  Returns the number of strands cut."""
+        p0 = _vec3("plane_point", plane_point)
+        n = _vec3("plane_normal", plane_normal)
+        if np.linalg.norm(n) == 0:
+            raise ValueError("'plane_normal' must be a non-zero vector")
+        n = n / np.linalg.norm(n)
+        if not isinstance(selected_only, bool):
+            raise ValueError(f"'selected_only' must be true or false, got {selected_only!r}")
+        g = self.groom
+        cur_all = g.points.astype(np.float64)
+        rest_all = g.rest_points.astype(np.float64)
+        dist = (cur_all - p0) @ n
+        chosen = self.strand_selection if selected_only else np.ones(g.strand_count, dtype=bool)
+        new = {}
+        off = g.strand_offsets
+        for s in np.nonzero(chosen)[0]:
+            a, b = off[s], off[s + 1]
+            d = dist[a:b]
+            if d[0] == 0.0:
+                continue
+            other = np.nonzero(d * np.sign(d[0]) <= 0.0)[0]
+            if other.size == 0:
+                continue
+            k = int(other[0])
+            j = k - 1
+            u = d[j] / (d[j] - d[k])
+            new[int(s)] = _cut(cur_all[a:b], rest_all[a:b], j, float(u))
+
+        def apply():
+            if new:
+                self._replace_strands(new)
+
+        self._edit("trim", {"plane_point": p0.tolist(), "plane_normal": _vec3("plane_normal", plane_normal).tolist(),
+                            "selected_only": selected_only}, apply)
+        return len(new)
+
+    def scale_length(self, factor) -> None:
+        """Multiply the rest length of the selected strands by ``factor`` > 0, from the tip:
+        shorter strands are cut at the scaled rest arc length, longer ones grow, continuing the
+        tip's curvature and torsion at the last rest edge length."""
+        f = _positive("factor", factor)
+        sel = np.nonzero(self.strand_selection)[0]
+        if sel.size == 0:
+            raise ValueError("scale_length: no strand is selected")
+        g = self.groom
+        off = g.strand_offsets
+        new = {}
+        for s in sel:
+            a, b = off[s], off[s + 1]
+            cur = g.points[a:b].astype(np.float64)
+            rest = g.rest_points[a:b].astype(np.float64)
+            _, le = _tangents(rest)
+            total = float(le.sum())
+            if f < 1.0:
+                j, u = _arc_cut(rest, f * total)
+                new[int(s)] = _cut(cur, rest, j, u)
+            elif f > 1.0:
+                extra = (f - 1.0) * total
+                k = max(1, int(round(extra / le[-1])))
+                step = extra / k
+                q = _tip_rotation(rest)
+                t = rest[-1] - rest[-2]
+                t /= np.linalg.norm(t)
+                grown = []
+                tip = rest[-1]
+                for _ in range(k):
+                    t = q @ t
+                    t /= np.linalg.norm(t)
+                    tip = tip + step * t
+                    grown.append(tip)
+                grown = np.array(grown)
+                m = _tip_frame_map(rest, cur)
+                cur_grown = cur[-1] + (grown - rest[-1]) @ m.T
+                src = np.r_[np.arange(b - a), np.full(k, b - a - 1)]
+                fresh = np.r_[np.zeros(b - a, dtype=bool), np.ones(k, dtype=bool)]
+                new[int(s)] = (np.vstack([cur, cur_grown]), np.vstack([rest, grown]), src, fresh)
+
+        def apply():
+            if new:
+                self._replace_strands(new)
+
+        self._edit("scale_length", {"factor": f}, apply)
+
+    def scale_curl(self, factor) -> None:
+        """Multiply the rest curvature (every Bishop turning angle) of the selected strands by
+        ``factor`` >= 0; edge lengths and the root edge are kept.  The edited strands' current
+        pose is set to the new rest pose (it settles again when simulated)."""
+        f = _positive("factor", factor, allow_zero=True)
+        sel = np.nonzero(self.strand_selection)[0]
+        if sel.size == 0:
+            raise ValueError("scale_curl: no strand is selected")
+        g = self.groom
+        off = g.strand_offsets
+        rest = g.rest_points.copy()
+        pts = g.points.copy()
+        for s in sel:
+            a, b = off[s], off[s + 1]
+            q = _scale_curl_polyline(g.rest_points[a:b].astype(np.float64), f)
+            q[:2] = g.rest_points[a:a + 2]  # the clamped root edge, bit for bit
+            rest[a:b] = q.astype(rest.dtype)
+            pts[a:b] = rest[a:b]
+
+        def apply():
+            self.groom = replace(g, points=pts, rest_points=rest, params=dict(g.params))
+            self._invalidate()
+
+        self._edit("scale_curl", {"factor": f}, apply)
+
+    # ------------------------------------------------------------------ kinematic edits
+    def _proxy(self) -> np.ndarray:
+        """Groom vertex simulated in place of each groom vertex, int64 (vertex_count,): itself on a
+        guide strand; on another strand, the vertex of its nearest guide (by root) at the nearest
+        rest arc fraction."""
+        if self._proxy_cache is not None:
+            return self._proxy_cache
+        g = self.groom
+        off = g.strand_offsets
+        guides = self._guide_strands()
+        proxy = np.arange(g.vertex_count, dtype=np.int64)
+        if guides.size < g.strand_count:
+            rest = g.rest_points.astype(np.float64)
+            roots = rest[off[:-1]]
+            from scipy.spatial import cKDTree
+
+            _, nearest = cKDTree(roots[guides]).query(roots)
+            is_guide = np.zeros(g.strand_count, dtype=bool)
+            is_guide[guides] = True
+
+            def fractions(s):
+                _, le = _tangents(rest[off[s]:off[s + 1]])
+                c = np.r_[0.0, np.cumsum(le)]
+                return c / c[-1]
+
+            for s in np.nonzero(~is_guide)[0]:
+                gs = guides[nearest[s]]
+                fg = fractions(gs)
+                fs = fractions(s)
+                idx = np.clip(np.searchsorted(fg, fs), 1, len(fg) - 1)
+                idx -= (fs - fg[idx - 1]) < (fg[idx] - fs)
+                proxy[off[s]:off[s + 1]] = off[gs] + idx
+        self._proxy_cache = proxy
+        return proxy
+
+    def _guide_strands(self) -> np.ndarray:
+        g, cfg = self.groom, self.config
+        if cfg.guide_ratio >= 1.0:
+            return np.arange(g.strand_count)
+        from .skinning import select_guides
+
+        roots = g.rest_points.astype(np.float64)[g.strand_offsets[:-1]]
+        return np.sort(select_guides(roots, cfg.guide_ratio, cfg.seed))
+
+    def _grabbable(self, mask: np.ndarray) -> np.ndarray:
+        """Groom vertices (proxies) of ``mask``, without clamped root vertices (local index 0, 1)."""
+        local = np.arange(self.groom.vertex_count) - np.repeat(self.groom.strand_offsets[:-1],
+                                                               self.groom.strand_vertex_counts())
+        v = np.unique(self._proxy()[mask & (local > 1)])
+        local_v = local[v]
+        return v[local_v > 1]
+
+    def drag(self, target_offset, stiffness=0.5) -> None:
+        """Pull the selected vertices toward anchor + ``target_offset`` [m] (anchor: their position
+        when the drag began); each frame they move ``stiffness`` in (0, 1] of the remaining way.
+        Call again with a new offset to move the target; :meth:`release` ends the drag."""
+        off = _vec3("target_offset", target_offset)
+        s = _positive("stiffness", stiffness)
+        if s > 1.0:
+            raise ValueError(f"'stiffness' must lie in (0, 1], got {stiffness!r}")
+        verts = None
+        if self._drag is None:
+            verts = self._grabbable(self._selection)
+            if verts.size == 0:
+                raise ValueError("drag: no selected vertex can move (nothing selected, or only clamped roots)")
+
+        def apply():
+            if self._drag is None:
+                anchor = self.groom.points[verts].astype(np.float64)
+                self._drag = {"vertices": verts, "anchor": anchor, "position": anchor.copy()}
+            self._drag["offset"] = off
+            self._drag["stiffness"] = s
+            if self._sim is not None:
+                self._apply_kinematics()
+
+        self._edit("drag", {"target_offset": off.tolist(), "stiffness": s}, apply)
+
+    def release(self) -> None:
+        """End the drag: the dragged vertices are free again."""
+        if self._drag is None:
+            raise ValueError("release: no drag is active")
+
+        def apply():
+            self._drag = None
+            if self._sim is not None:
+                self._apply_kinematics()
+
+        self._edit("release", {}, apply)
+
+    def _set_pins(self, action: str, value: bool) -> None:
+        if not self._selection.any():
+            raise ValueError(f"{action}: nothing is selected")
+
+        def apply():
+            pinned = self.groom.pinned.copy()
+            pinned[self._selection] = value
+            self.groom = replace(self.groom, pinned=pinned, params=dict(self.groom.params))
+            if self._sim is not None:
+                self._apply_kinematics()
+
+        self._edit(action, {}, apply)
+
+    def pin(self) -> None:
+        """Pin the selected vertices where they are (kinematic until unpinned; ``Groom.pinned``)."""
+        self._set_pins("pin", True)
+
+    def unpin(self) -> None:
+        """Free the selected vertices."""
+        self._set_pins("unpin", False)
+
+    # ------------------------------------------------------------------ parameters, simulation
+    def set_parameter(self, name, value) -> None:
+        """Set one :class:`GroomingConfig` field (validated; errors name the field)."""
+        names = [f.name for f in fields(GroomingConfig)]
+        if name not in names:
+            raise ValueError(f"set_parameter: unknown parameter {name!r}; known: {', '.join(names)}")
+        new = replace(self.config, **{name: value})  # __post_init__ validates
+        logged = new.to_dict()[name]
+
+        def apply():
+            self.config = new
+            if name in REBUILD_PARAMETERS:
+                self._invalidate()
+            elif self._sim is not None:
+                self._apply_live_parameters()
+
+        self._edit("set_parameter", {"name": name, "value": logged}, apply)
+
+    def simulate(self, on: bool = True) -> None:
+        """Turn the simulation on or off (when off, :meth:`advance` does nothing)."""
+        if not isinstance(on, bool):
+            raise ValueError(f"'on' must be true or false, got {on!r}")
+        self.simulating = on
+        self._record("simulate", on=on)
+
+    def advance(self, frames: int = 1) -> None:
+        """Run ``frames`` quasistatic frames (``config.iterations`` ADMM iterations each) and write the
+        result into ``groom.points``.  Rebuilds the Model first if an edit asked for it."""
+        if not (isinstance(frames, (int, np.integer)) and not isinstance(frames, bool) and frames >= 1):
+            raise ValueError(f"'frames' must be an integer >= 1, got {frames!r}")
+        frames = int(frames)
+        if self.simulating:
+            import taichi as ti
+
+            fresh = self._sim is None
+            self._ensure_built()
+            sim = self._sim
+            for f in range(frames):
+                t0 = time.perf_counter()
+                if self._drag is not None:
+                    d = self._drag
+                    d["position"] += d["stiffness"] * (d["anchor"] + d["offset"] - d["position"])
+                    sim.body[sim.drag_rows] = d["position"]
+                    sim.model.vertex_body_position.from_numpy(sim.body.astype(sim.np_float))
+                sim.solver.step(sim.state, sim.control, 1.0)
+                ti.sync()
+                (self.timings["first_frame"] if fresh and f == 0 else self.timings["frame"]).append(
+                    time.perf_counter() - t0)
+            self._write_back()
+        self._record("advance", frames=frames)
+
+    # ------------------------------------------------------------------ the simulation objects
+    def _invalidate(self) -> None:
+        self._sim = None
+        self._proxy_cache = None
+
+    def _ensure_built(self) -> None:
+        if self._sim is not None:
+            return
+        from types import SimpleNamespace
+
+        from .builder import GroomBuilder
+        from .config import ContactConfig, RodMaterial, SolverADMMConfig
+        from .model import _np_float
+        from .skinning import SkinningConfig, SkinningLBS
+        from .solver_admm import SolverADMM
+
+        t0 = time.perf_counter()
+        g, cfg = self.groom, self.config
+        off = g.strand_offsets
+        rest = g.rest_points.astype(np.float64)
+        guides = self._guide_strands()
+        material = RodMaterial(radius=cfg.radius, density=cfg.density, youngs_modulus_bend=cfg.youngs_modulus,
+                               youngs_modulus_stretch=cfg.youngs_modulus)
+        builder = GroomBuilder()
+        for s in guides:
+            builder.add_strand(rest[off[s]:off[s + 1]], material, root="clamped", body=0)
+        model = builder.finalize()
+        contacts = None
+        if cfg.contacts or self.colliders:
+            # Proximity only (Sec. 5.3): no velocity-dependent margin growth.
+            contacts = ContactConfig(hair_hair=cfg.contacts, friction=cfg.friction, margin=cfg.contact_margin,
+                                     velocity_margin=0.0)
+        solver = SolverADMM(model, SolverADMMConfig(iterations=cfg.iterations, mode="quasistatic", w0=cfg.w0,
+                                                    contacts=contacts), colliders=self.colliders or None)
+        state = model.state()
+        control = model.control()
+        control.gravity = tuple(cfg.gravity)
+        skin = None
+        if guides.size < g.strand_count:
+            polylines = [rest[off[s]:off[s + 1]] for s in range(g.strand_count)]
+            skin = SkinningLBS(model, guides, polylines,
+                               SkinningConfig(neighbour_count=min(cfg.neighbour_count, int(guides.size))),
+                               strand_body=0)
+        guide_vertex = np.concatenate([np.arange(off[s], off[s + 1]) for s in guides])
+        row_of = np.full(g.vertex_count, -1, dtype=np.int64)
+        row_of[guide_vertex] = np.arange(guide_vertex.size)
+        self._sim = SimpleNamespace(model=model, solver=solver, state=state, control=control, skin=skin,
+                                    rest=state.to_numpy(), guide_vertex=guide_vertex, row_of=row_of,
+                                    base_fixed=model.host["vertex_is_fixed"].copy(),
+                                    base_body=model.host["vertex_body_position"].copy(), body=None,
+                                    drag_rows=np.zeros(0, dtype=np.int64), np_float=_np_float())
+        self._load_state()
+        self.rebuild_count += 1
+        self.timings["rebuild"].append(time.perf_counter() - t0)
+
+    def _apply_live_parameters(self) -> None:
+        sim, cfg = self._sim, self.config
+        sim.control.gravity = tuple(cfg.gravity)
+        sim.solver.config.iterations = cfg.iterations
+        if sim.solver.contacts is not None:
+            sim.solver.contacts.config.friction = cfg.friction
+
+    def _load_state(self) -> None:
+        """State from the groom: rest frames and twists, current positions; fresh multipliers."""
+        sim = self._sim
+        sim.state.load(sim.rest)
+        sim.state.vertex_position.from_numpy(self.groom.points[sim.guide_vertex].astype(sim.np_float))
+        sim.solver.reset_duals()
+        self._apply_kinematics()
+
+    def _apply_kinematics(self) -> None:
+        """Write vertex_is_fixed / vertex_body_position: clamped roots, pins (where the groom has the
+        vertex now) and the drag (its current prescribed positions).  Body 0 stays the identity."""
+        sim = self._sim
+        fixed = sim.base_fixed.copy()
+        body = sim.base_body.copy()
+        pinned = self._grabbable(self.groom.pinned)
+        rows = sim.row_of[pinned]
+        fixed[rows] = 1
+        body[rows] = self.groom.points[pinned].astype(np.float64)
+        sim.drag_rows = np.zeros(0, dtype=np.int64)
+        if self._drag is not None:
+            sim.drag_rows = sim.row_of[self._drag["vertices"]]
+            fixed[sim.drag_rows] = 1
+            body[sim.drag_rows] = self._drag["position"]
+        sim.body = body
+        sim.model.vertex_is_fixed.from_numpy(fixed.astype(np.int32))
+        sim.model.vertex_body_position.from_numpy(body.astype(sim.np_float))
+
+    def _write_back(self) -> None:
+        """groom.points <- simulated guides (State) and skinned strands, in the groom's dtype."""
+        sim = self._sim
+        x = sim.state.vertex_position.to_numpy()
+        if sim.skin is not None:
+            sim.skin.deform(sim.state, sim.control)
+            pts = sim.skin.positions().astype(self.groom.points.dtype)
+        else:
+            pts = self.groom.points.copy()
+        pts[sim.guide_vertex] = x.astype(pts.dtype)
+        self.groom = replace(self.groom, points=pts, params=dict(self.groom.params))
