@@ -107,9 +107,11 @@ class GroomingConfig:
         seed: seed of the guide selection [-].
         contacts: hair-hair proximity contacts on or off.
         contact_margin: proximity margin of the contact detection [m].
-        w0: scale of the ADMM elasticity weights [-] (SolverADMMConfig.w0).  0.2 settles a
-            quasistatic groom within about ten 10-iteration frames where the dynamic default 25
-            still creeps after 200 (12 strands x 10 vertices, 10 cm, measured).
+        w0: scale of the ADMM elasticity weights [-] (SolverADMMConfig.w0).  Measured on 12
+            strands x 10 vertices, 10 cm, 10 iterations per frame: 1 settles the sag to 3 % in 10
+            frames and holds a strand dragged by its tip still; 0.2 settles faster but a strand
+            with both ends kinematic keeps oscillating (centimetres) from frame to frame; 5 and
+            the dynamic default 25 creep (the sag is half done after 20 frames at 5).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
         undo_limit: most undo snapshots kept [-].
     """
@@ -125,7 +127,7 @@ class GroomingConfig:
     seed: int = 0
     contacts: bool = True
     contact_margin: float = 1.0e-4
-    w0: float = 0.2
+    w0: float = 1.0
     autosave_every: int = 1
     undo_limit: int = 100
 
@@ -455,6 +457,11 @@ class GroomingSession:
     @property
     def dragging(self) -> bool:
         return self._drag is not None
+
+    @property
+    def guide_strands(self) -> np.ndarray:
+        """Indices of the simulated strands (the others are skinned), int64, sorted."""
+        return self._guide_strands()
 
     # ------------------------------------------------------------------ log, undo, autosave machinery
     def _record(self, action: str, **params) -> None:

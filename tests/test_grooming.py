@@ -1,0 +1,321 @@
+"""GroomingSession (Daviet 2023 Sec. 5.3): each action changes what it should and nothing else,
+undo/redo bit for bit, save/autosave round trips, session logs replayed bit for bit, bad entries named.
+
+Most tests edit the groom without simulating (pure NumPy); one test runs the solver (two sessions,
+three Model builds: each build recompiles the kernels, about 3 to 10 s on a busy 2-core CPU).
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from taichi_hair.grooming import GroomingConfig, GroomingSession
+from taichi_hair.io import Groom, load_groom
+
+NS, NV, LENGTH, CURL = 12, 10, 0.1, 0.004
+
+
+def polylines(ns=NS, nv=NV):
+    """Strands leaving a ring of radius 1 cm radially in the xz plane, each a helix about its axis
+    (constant discrete curvature and torsion)."""
+    out = []
+    for s in range(ns):
+        a = 2 * np.pi * s / ns
+        root = np.array([0.01 * np.cos(a), 0.0, 0.01 * np.sin(a)])
+        d = np.array([np.cos(a), 0.0, np.sin(a)])
+        side = np.cross(d, [0.0, 1.0, 0.0])
+        t = np.linspace(0.0, LENGTH, nv)
+        coil = CURL * (np.outer(np.cos(80 * t + s), [0.0, 1.0, 0.0]) + np.outer(np.sin(80 * t + s), side))
+        out.append(root + t[:, None] * d + coil - coil[0])
+    return out
+
+
+def session(**kw):
+    kw.setdefault("contacts", False)
+    kw.setdefault("guide_ratio", 1.0)
+    autosave = kw.pop("autosave_path", None)
+    return GroomingSession(polylines(), GroomingConfig(**kw), autosave_path=autosave)
+
+
+def strand(g, s, rest=False):
+    a = g.rest_points if rest else g.points
+    return a[g.strand_offsets[s]:g.strand_offsets[s + 1]].astype(np.float64)
+
+
+def turning_angles(p):
+    e = np.diff(p, axis=0)
+    t = e / np.linalg.norm(e, axis=1)[:, None]
+    return np.arccos(np.clip(np.sum(t[:-1] * t[1:], axis=1), -1.0, 1.0))
+
+
+def edge_lengths(p):
+    return np.linalg.norm(np.diff(p, axis=0), axis=1)
+
+
+def same_groom(a, b):
+    return (np.array_equal(a.strand_offsets, b.strand_offsets) and a.points.dtype == b.points.dtype
+            and np.array_equal(a.points, b.points) and np.array_equal(a.rest_points, b.rest_points)
+            and np.array_equal(a.pinned, b.pinned))
+
+
+def test_config_validation_names_the_field():
+    for name, bad in (("youngs_modulus", -1.0), ("friction", float("nan")), ("iterations", 0),
+                      ("guide_ratio", 1.5), ("gravity", (0, 1)), ("contacts", "yes"), ("w0", 0.0)):
+        with pytest.raises(ValueError, match=name):
+            GroomingConfig(**{name: bad})
+    s = session()
+    with pytest.raises(ValueError, match="nope"):
+        s.set_parameter("nope", 1)
+    with pytest.raises(ValueError, match="friction"):
+        s.set_parameter("friction", -0.1)
+    assert s.log == [] and not s.can_undo  # a refused edit leaves no trace
+    s.set_parameter("gravity", (0.0, 0.0, -9.81))
+    assert s.config.gravity == (0.0, 0.0, -9.81) and s.log[-1] == {"action": "set_parameter", "name": "gravity",
+                                                                  "value": [0.0, 0.0, -9.81]}
+
+
+def test_select_sphere_and_ray():
+    s = session()
+    g = s.groom
+    tip0 = strand(g, 0)[-1]
+    assert s.select(tip0, 0.003) == 1
+    assert s.strand_selection.tolist() == [True] + [False] * (NS - 1)
+    sel = np.nonzero(s.vertex_selection)[0]
+    assert NV - 1 in sel and np.all(sel < NV)  # the tip and its neighbours only
+    # A ray from above through strand 3's middle picks strand 3; pointing away it picks nothing.
+    mid3 = strand(g, 3)[NV // 2]
+    assert s.select_ray(mid3 + [0, 0.5, 0], [0, -1, 0], 0.002) == 1 and s.strand_selection[3]
+    assert s.select_ray(mid3 + [0, 0.5, 0], [0, 1, 0], 0.002) == 0
+    s.select_strands([1, 2])
+    s.select(tip0, 0.003, mode="add")
+    assert np.nonzero(s.strand_selection)[0].tolist() == [0, 1, 2]
+    s.select_strands([1], mode="remove")
+    assert np.nonzero(s.strand_selection)[0].tolist() == [0, 2]
+    with pytest.raises(ValueError, match="radius"):
+        s.select(tip0, -1.0)
+    with pytest.raises(ValueError, match="mode"):
+        s.select(tip0, 0.01, mode="xor")
+    assert not s.can_undo  # selection is not an edit
+
+
+def test_trim_cuts_only_strands_crossing_the_plane():
+    s = session()
+    before = s.groom.copy()
+    x_cut = 0.06
+    crossing = [i for i in range(NS) if strand(before, i)[:, 0].max() > x_cut]
+    assert 0 < len(crossing) < NS
+    assert s.trim([x_cut, 0, 0], [1, 0, 0]) == len(crossing)
+    after = s.groom
+    for i in range(NS):
+        old, new = strand(before, i), strand(after, i)
+        if i in crossing:
+            assert new[:, 0].max() <= x_cut + 1e-12 and abs(new[-1, 0] - x_cut) < 1e-12  # the tip on the plane
+            assert after.lengths()[i] < before.lengths()[i]
+            keep = new.shape[0] - 1
+            assert np.array_equal(new[:keep], old[:keep])  # the root side is untouched
+            assert np.array_equal(strand(after, i, True)[:keep], strand(before, i, True)[:keep])
+        else:
+            assert np.array_equal(new, old) and np.array_equal(strand(after, i, True), strand(before, i, True))
+    assert s.trim([1.0, 0, 0], [1, 0, 0]) == 0  # a plane beyond every tip cuts nothing
+
+
+def test_scale_length_changes_only_the_selection_and_keeps_the_curvature():
+    s = session()
+    before = s.groom.copy()
+    s.select_strands([1, 4])
+    s.scale_length(1.5)
+    grown = s.groom
+    angle = turning_angles(strand(before, 1, True))
+    for i in range(NS):
+        if i in (1, 4):
+            r = strand(grown, i, True)
+            assert math.isclose(edge_lengths(r).sum(), 1.5 * before.lengths()[i], rel_tol=1e-9)
+            assert np.array_equal(strand(grown, i)[:NV], strand(before, i)[:NV])  # grown from the tip
+            # A helix continues as the same helix: every turning angle is the original one.
+            np.testing.assert_allclose(turning_angles(r), angle[0], rtol=1e-6)
+        else:
+            assert np.array_equal(strand(grown, i), strand(before, i))
+            assert np.array_equal(strand(grown, i, True), strand(before, i, True))
+    s.scale_length(0.5)
+    for i in (1, 4):
+        assert math.isclose(edge_lengths(strand(s.groom, i, True)).sum(), 0.75 * before.lengths()[i],
+                            rel_tol=1e-9)
+    assert np.array_equal(strand(s.groom, 0), strand(before, 0))
+    s.select_strands([])
+    with pytest.raises(ValueError, match="no strand is selected"):
+        s.scale_length(2.0)
+
+
+def test_scale_curl_scales_the_rest_curvature_of_the_selection_only():
+    s = session()
+    before = s.groom.copy()
+    s.select_strands([2, 7])
+    s.scale_curl(0.5)
+    for i in range(NS):
+        r0, r1 = strand(before, i, True), strand(s.groom, i, True)
+        if i in (2, 7):
+            np.testing.assert_allclose(turning_angles(r1), 0.5 * turning_angles(r0), rtol=1e-7, atol=1e-12)
+            np.testing.assert_allclose(edge_lengths(r1), edge_lengths(r0), rtol=1e-12)
+            assert np.array_equal(r1[:2], r0[:2])  # the clamped root edge
+            assert np.array_equal(strand(s.groom, i), r1)  # the current pose restarts from the rest pose
+        else:
+            assert np.array_equal(r1, r0) and np.array_equal(strand(s.groom, i), strand(before, i))
+    s.scale_curl(0.0)
+    assert np.all(turning_angles(strand(s.groom, 2, True)) < 1e-7)  # straightened
+
+
+def test_undo_redo_restore_bit_for_bit():
+    s = session()
+    states = [s.groom.copy()]
+    s.select_strands([0, 5])
+    s.scale_length(1.3)
+    states.append(s.groom.copy())
+    s.trim([0.05, 0, 0], [1, 0, 0])
+    states.append(s.groom.copy())
+    s.scale_curl(2.0)
+    states.append(s.groom.copy())
+    s.select_all()
+    s.pin()
+    states.append(s.groom.copy())
+    s.set_parameter("youngs_modulus", 1.0e9)
+    assert all(not same_groom(a, b) for a, b in zip(states, states[1:]))
+    for k in range(len(states) - 1, -1, -1):
+        s.undo()
+        assert same_groom(s.groom, states[k])
+    assert s.config.youngs_modulus == 3.0e9
+    with pytest.raises(ValueError, match="nothing to undo"):
+        s.undo()
+    for k in range(1, len(states)):
+        s.redo()
+        assert same_groom(s.groom, states[k])
+    s.redo()
+    assert s.config.youngs_modulus == 1.0e9
+    s.undo()
+    s.select_all()
+    s.unpin()  # a new edit drops the redo stack
+    with pytest.raises(ValueError, match="nothing to redo"):
+        s.redo()
+
+
+def test_save_then_load_returns_the_groom_and_its_rest_pose(tmp_path):
+    s = session(friction=0.3)
+    s.select_strands([3])
+    s.scale_curl(1.5)
+    s.trim([0.07, 0, 0], [1, 0, 0])
+    s.select_strands([4])
+    s.pin()
+    path = tmp_path / "edited.thair.npz"
+    s.save(path)
+    g = load_groom(path)
+    assert same_groom(g, s.groom)
+    assert g.params["grooming"] == s.config.to_dict()
+    again = GroomingSession(g)
+    assert again.config == s.config and same_groom(again.groom, s.groom)
+
+
+def test_autosave_writes_loadable_files_every_n_edits(tmp_path):
+    src = tmp_path / "base.thair.npz"
+    from taichi_hair.io import save_groom
+
+    save_groom(Groom.from_polylines(polylines(), units="m"), src)
+    s = GroomingSession.open(src, GroomingConfig(contacts=False, guide_ratio=1.0, autosave_every=2))
+    assert s.autosave_path == str(tmp_path / "base.autosave.thair.npz")
+    s.select_strands([0, 1])
+    s.scale_length(0.8)
+    assert not (tmp_path / "base.autosave.thair.npz").exists()
+    s.scale_curl(0.5)
+    assert (tmp_path / "base.autosave.thair.npz").exists()
+    assert same_groom(load_groom(tmp_path / "base.autosave.thair.npz"), s.groom)
+    log = json.loads((tmp_path / "base.autosave.session.json").read_text())
+    assert [e["action"] for e in log] == ["select_strands", "scale_length", "scale_curl"]
+    # The autosaved log replayed on the original file gives the autosaved groom.
+    t = GroomingSession.open(src, autosave=False)
+    t.replay(tmp_path / "base.autosave.session.json")
+    assert same_groom(t.groom, s.groom)
+
+
+def test_replay_of_an_editing_log_is_bitwise_and_bad_entries_are_named(tmp_path):
+    s = session()
+    s.select([0.05, 0, 0], 0.02)
+    s.scale_length(1.7)
+    s.select_ray([0.0, 0.5, 0.0], [0.0, -1.0, 0.0], 0.03, mode="add")
+    s.scale_curl(1.4)
+    s.trim([0.0, 0.0, 0.06], [0.0, 0.0, 1.0], selected_only=True)
+    s.undo()
+    s.redo()
+    s.pin()
+    path = tmp_path / "session.json"
+    s.write_log(path)
+    grooms = []
+    for _ in range(2):
+        t = session()
+        t.replay(path)
+        grooms.append(t.groom)
+        assert t.log == s.log
+    assert same_groom(grooms[0], s.groom) and same_groom(grooms[1], s.groom)
+
+    entries = json.loads(path.read_text())
+    cases = [
+        (entries[:1] + [{"action": "comb", "teeth": 3}], r"entry 1.*unknown action 'comb'"),
+        (entries[:2] + [{"action": "scale_length", "factor": -2.0}], r"entry 2.*'scale_length'.*factor"),
+        ([{"action": "select", "center": [0, 0], "radius": 0.1}], r"entry 0.*'select'.*center"),
+        ([{"action": "trim", "plane_point": [0, 0, 0]}], r"entry 0.*'trim'.*plane_normal"),
+        ([{"action": "advance", "frames": 1, "speed": 2}], r"entry 0.*'advance'.*speed"),
+        ([{"radius": 1}], r"entry 0.*'action'"),
+    ]
+    for bad, pattern in cases:
+        with pytest.raises(ValueError, match=pattern):
+            session().replay(bad)
+    # From a file the message names the line too (one entry per line after the opening bracket).
+    bad_file = tmp_path / "bad.json"
+    bad_file.write_text("[\n" + ",\n".join(json.dumps(e) for e in entries[:2] + [
+        {"action": "set_parameter", "name": "iterations", "value": 0}]) + "\n]\n")
+    with pytest.raises(ValueError, match=r"entry 2 \(line 4\).*'set_parameter'.*iterations"):
+        session().replay(bad_file)
+
+
+def test_simulated_session_drag_pin_rebuild_and_replay(tmp_path):
+    """Runs the solver: drag reaches its target geometrically, pins hold bit for bit, a trim
+    rebuilds the Model, and the log replayed in a fresh session gives the same groom bit for bit."""
+    a = session(guide_ratio=0.5, iterations=10)
+    guides = a.guide_strands
+    assert guides.size == NS // 2
+    rest = a.groom.copy()
+    a.advance(10)
+    assert a.rebuild_count == 1
+    sag = rest.points[:, 1] - a.groom.points[:, 1]
+    tips = a.groom.strand_offsets[1:] - 1
+    assert np.all(sag[tips] > 0.01)  # every tip, guide or skinned, came down under gravity
+    settled = a.groom.points.copy()
+    g0, g_far = int(guides[0]), int(guides[len(guides) // 2])
+    tip = a.groom.strand_offsets[g0 + 1] - 1
+    a.select(settled[tip], 1e-4)
+    a.drag([0.0, 0.03, 0.0], stiffness=0.5)
+    a.advance(6)
+    target = settled[tip].astype(np.float64) + [0.0, 0.03, 0.0]
+    # The grabbed vertex is kinematic: it covers 1 - 0.5^6 of the way, exactly (to float32).
+    np.testing.assert_allclose(a.groom.points[tip], target - 0.5**6 * np.array([0.0, 0.03, 0.0]), atol=2e-6)
+    far = slice(a.groom.strand_offsets[g_far], a.groom.strand_offsets[g_far + 1])
+    assert np.abs(a.groom.points[far] - settled[far]).max() < 2e-3  # a distant guide only keeps settling
+    a.release()
+    a.select(settled[a.groom.strand_offsets[g_far] + 5], 1e-4)
+    a.pin()
+    pinned = a.groom.points[a.groom.pinned].copy()
+    a.set_parameter("gravity", [0.0, 9.81, 0.0])
+    a.advance(4)
+    assert np.array_equal(a.groom.points[a.groom.pinned], pinned)  # pins hold bit for bit
+    assert a.groom.points[a.groom.strand_offsets[g_far + 1] - 1, 1] > settled[a.groom.strand_offsets[g_far + 1] - 1, 1]
+    mid, k = a.groom.copy(), len(a.log)
+    a.trim([0.06, 0.0, 0.0], [1.0, 0.0, 0.0])
+    a.advance(2)
+    assert a.rebuild_count == 2 and len(a.timings["rebuild"]) == 2 and len(a.timings["first_frame"]) == 2
+    assert np.all(np.isfinite(a.groom.points)) and a.groom.vertex_count < mid.vertex_count
+    a.undo()
+    assert same_groom(a.groom, mid)
+    path = tmp_path / "session.json"
+    a.write_log(path)
+    b = session(guide_ratio=0.5, iterations=10)
+    b.replay(json.loads(path.read_text())[:k])
+    assert same_groom(b.groom, mid)
