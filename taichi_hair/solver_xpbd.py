@@ -72,7 +72,7 @@ vec4 = ti.math.vec4
 FRAME_INERTIAS = ("segment", "section")
 #: Up to this many iterations a substep is one kernel launch with the sweeps unrolled (compile time grows
 #: with the count); beyond, one launch per sweep.
-_FUSED_ITERATIONS = 4
+_FUSED_ITERATIONS = 2
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
 

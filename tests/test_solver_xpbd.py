@@ -51,13 +51,14 @@ def _hanging_stretch(substeps, iterations=1):
     model = b.finalize()
     st, ctl = model.state(), model.control()
     solver = SolverXPBD(model, SolverXPBDConfig(substeps=substeps, iterations=iterations, damping=20.0))
-    for _ in range(30):
+    for _ in range(20):
         solver.step(st, ctl, 1 / 96)
     return float(np.max(solver.edge_stretch(st)))
 
 
 def test_stretch_of_a_hanging_strand_shrinks_with_substeps_and_iterations():
-    """Local solves leave a stretch that only more work removes (hard stretch: E_s A ~ 24 N)."""
+    """Local solves leave a stretch that only more work removes (stiff stretch: E_s A ~ 24 N).
+    Measured (30 steps): 4.3 (!), 0.31, 0.020 with 2, 8, 32 substeps; 1.2 with 2 substeps x 4 iterations."""
     by_substeps = [_hanging_stretch(n) for n in (2, 8, 32)]
     assert by_substeps[0] > 4 * by_substeps[1] > 16 * by_substeps[2], by_substeps
     by_iterations = [_hanging_stretch(2, k) for k in (1, 4)]
