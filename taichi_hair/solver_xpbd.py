@@ -80,6 +80,9 @@ _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angula
 class SolverXPBDConfig:
     """Settings of :class:`SolverXPBD`.
 
+    ``substeps``, ``iterations``, ``damping`` and ``air_viscosity`` are read at every step and may be
+    changed between steps; the other fields are used when the solver is built.
+
     Attributes:
         substeps: substeps per call to ``step``; dt_s = dt / substeps [-].
             Small-step XPBD (Macklin et al. 2019) uses many substeps and one
