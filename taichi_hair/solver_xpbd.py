@@ -12,21 +12,24 @@ position constraints.  The bend-twist constraint 2 Im(conj(q_a) q_b) is the
 Korner strain the ADMM solver uses by default, so its compliance is exactly
 v*/(E K_aa) of the ADMM energy (Sec. 4.1, with the same bending Voronoi
 lengths v*); the stretch-shear compliance is 1/(E_s A l) per component.
-The two transverse (shear) components have no DER counterpart; they get the
-stretch stiffness, which keeps the frame on the tangent to ~1e-5 rad for hair.
+The two transverse (shear) components have no DER counterpart (DER frames
+sit on the tangents); they get the stretch stiffness E_s A l rather than a
+shear modulus, the stiffest choice and so the closest to DER.
 
 Per step ``step(state, control, dt)`` (Macklin et al. 2019, "small steps"):
 
 1. rebuild the edge quaternions and angular velocities from the State's
    material frames and velocities; save the state     -- ``xpbd_constraints.begin_step``
-2. for each of ``substeps`` substeps of dt_s = dt / substeps:
-   a. predict: kinematic roots interpolated toward R_b x_body + T_b,
-      v += dt_s g (+ exact linear drag), x += dt_s v, q += dt_s/2 omega q;
-      Lagrange multipliers reset to zero              -- ``predict``
-   b. ``iterations`` times: the four constraint colors, Gauss-Seidel across
-      colors, parallel inside each (no conflicts)      -- ``solve_constraints``
+2. for each of ``substeps`` substeps of dt_s = dt / substeps (one launch each,
+   ``xpbd_constraints.substep``, up to 2 iterations; else one per sweep):
+   a. record C at the substep start (damping), reset the Lagrange multipliers;
+      kinematic roots interpolated toward R_b x_body + T_b (the root frame
+      toward R_b times its rest frame); v += dt_s g (+ exact linear drag),
+      x += dt_s v; each free frame follows its edge (minimal rotation from
+      d3(q) to the predicted tangent) and turns by its twist rate
+   b. ``iterations`` times: bend-twist (even, odd pairs), then stretch-shear
+      (even, odd edges); Gauss-Seidel across colors, parallel inside each
    c. v = (x - x_prev)/dt_s, omega from q conj(q_prev), times exp(-damping dt_s)
-                                                      -- ``update_velocities``
 3. DER frames from the new positions (time-parallel transport), twists from
    the quaternions                                    -- ``frames.update_reference_frames`` + ``write_twists``
 4. check every value is finite, else restore and raise SimulationDivergedError.
@@ -37,17 +40,38 @@ mean over the step, by the acceleration within the step); twists, twist rates
 and every DER frame.  The shear of the quaternions (their d3 off the tangent)
 is not stored in the State: each step starts from frames on the tangents.
 This makes a State snapshot the whole state (no hidden solver state between
-steps) at the cost of projecting out a ~1e-5 rad shear once per step.
+steps) at the cost of projecting out a small shear once per step.
 
-Frame inertia: the angular mass of an edge's frame is the tumbling inertia of
-the edge as a rigid segment, rho A l^3 / 12 (``frame_inertia="segment"``,
-default), or the physical cross-section inertia rho I l
-(``frame_inertia="section"``, R^2/l^2 ~ 1e-3 times lighter for hair).  The
-equilibrium does not depend on it; the convergence of a local solver does:
-with the section inertia the frames are so light that bending reaches the
-positions only through the stretch-shear constraint at a ratio ~R^2/l^2 per
-sweep (see tests/test_solver_xpbd.py).  The segment inertia double-counts a
-small part of the kinetic energy of rotating edges.
+Departures from Kugelstadt and Schoemer 2016, each measured on hair:
+
+* Stretch along d3 is solved with the positions' weights alone (K&S's
+  quaternion term 4 w_q I also counts the d3 direction, which a unit
+  quaternion cannot change): with their denominator a 2 cm cantilever at one
+  substep per 1/96 s step reached 65x edge stretch, 28x with the split (both
+  measured with K&S's frame momentum, below; the stretch is poor either way).
+* Frames carry no transverse angular momentum of their own: they follow their
+  edges in the prediction (twist rate kept).  With K&S's q += dt/2 omega q and
+  one iteration, a cantilever with 10 substeps and damping 50/s blew up
+  (edges 5x their length, twist 9 rad); with the follower it settles.
+* Bend-twist is swept before stretch-shear, so that the frame corrections
+  reach the positions in the same iteration (the other order, with the
+  follower prediction, made bending ineffective at one iteration).
+
+Frame inertia: the angular mass of an edge's frame (its weight in the
+solve) is the tumbling inertia of the edge as a rigid segment,
+rho A l^3 / 12 (``frame_inertia="segment"``, default), or the physical
+cross-section inertia rho I l (``"section"``, R^2/l^2 ~ 1e-3 times lighter
+for hair), times ``frame_inertia_scale``.  The equilibrium does not depend on
+it; the convergence does.  With light frames the bend-twist constraints
+(alpha~ << 4 w_q) snap the frames each sweep and the positions follow through
+stretch-shear: bending then acts on the positions like an explicit force,
+so undamped runs need dt_s below the explicit limit of the bending modes.
+Measured (2 cm hair cantilever, 16 edges, damping 0): 10 substeps per 1/96 s
+step go wild (160 % stretch, frames flip by 2 pi), 100 stay bounded over
+60 steps.  This, and the N-dependent convergence (tests/test_solver_xpbd.py:
+the 8-edge cantilever sags 38x / 4.6x / 1.5x / 1.1x the converged answer with
+30 / 100 / 300 / 1000 substeps; 16 edges 8.4x / 1.7x with 300 / 1000), is
+the weakness of purely local solvers that Daviet 2023, Sec. 4.2, describes.
 
 Nothing is allocated in ``step()``; no atomics, so CPU reruns are bitwise identical.
 """
