@@ -114,6 +114,28 @@ CANTILEVER_MANY = 1000
 CANTILEVER_TOL = 0.2
 
 
+def test_velocity_damping_calms_a_swinging_strand():
+    """SolverXPBDConfig.damping c multiplies velocities by exp(-c dt_s) each substep: released from
+    rest under gravity, a curly strand moves much less at c = 20/s than undamped."""
+    b = GroomBuilder()
+    b.add_strand(helix(n=25), HAIR)
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    start = st.to_numpy()
+    solver = SolverXPBD(model, SolverXPBDConfig(substeps=20))
+    late = []
+    for c in (0.0, 20.0):
+        st.load(start)
+        solver.config.damping = c
+        speeds = []
+        for k in range(30):
+            solver.step(st, ctl, 1 / 96)
+            if k >= 15:
+                speeds.append(np.linalg.norm(st.vertex_velocity.to_numpy().astype(np.float64), axis=1).mean())
+        late.append(float(np.mean(speeds)))
+    assert late[1] < 0.6 * late[0], late  # measured 0.097 vs 0.234 m/s
+
+
 def test_free_strand_centre_of_mass_falls_like_symplectic_euler():
     """Internal constraints conserve linear momentum: the centre of mass of a free strand follows
     the substep integrator exactly, x = x0 + g dt_s^2 K (K + 1) / 2 after K substeps."""
