@@ -123,10 +123,10 @@ def main(argv=None):
     rows = bench(ti, args.strands, args.vertices, settings, args.steps)
     out = args.out or os.path.join(HERE, "results", f"xpbd_{args.arch}.json")
     os.makedirs(os.path.dirname(out), exist_ok=True)
+    command = " ".join(["python", "benchmarks/bench_xpbd.py"] + (argv or sys.argv[1:]))
     result = {"benchmark": "bench_xpbd", "arch": args.arch, "precision": "f32",
               "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-              "machine": machine(), "command": " ".join(["python", "benchmarks/bench_xpbd.py"] + (argv or sys.argv[1:])),
-              "note": "shared machine; figures are noisy", "rows": rows}
+              "machine": machine(), "command": command, "note": "shared machine; figures are noisy", "rows": rows}
     with open(out, "w") as fh:
         json.dump(result, fh, indent=2)
     print(f"wrote {out}")
