@@ -97,6 +97,8 @@ FRAME_INERTIAS = ("segment", "section")
 #: Up to this many iterations a substep is one kernel launch with the sweeps unrolled (compile time grows
 #: with the count); beyond, one launch per sweep.
 _FUSED_ITERATIONS = 2
+_GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
+SCHEDULES = ("auto", "stage", "strand")
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
 
@@ -131,6 +133,11 @@ class SolverXPBDConfig:
             (rho A l^3/12) or ``"section"`` (rho I l); see the module docstring.
         frame_inertia_scale: factor on that angular mass [-] (> 0); the equilibrium does
             not depend on it, the convergence of the local solve does (see the module docstring).
+        schedule: ``"stage"``: one launch per substep, each color a loop over all
+            vertices (GPUs); ``"strand"``: all substeps of a step in one launch,
+            parallel over strands, each strand's colors as serial passes (CPUs);
+            ``"auto"``: ``"strand"`` on CPU, ``"stage"`` on GPU archs.  Same
+            arithmetic per element (equal to rounding, see the tests).
         check_finite: after each step, check every state value for NaN/inf and
             raise :class:`SimulationDivergedError` naming the strand.
     """
@@ -143,6 +150,7 @@ class SolverXPBDConfig:
     voronoi_rescaling: bool = True
     frame_inertia: str = "segment"
     frame_inertia_scale: float = 1.0
+    schedule: str = "auto"
     check_finite: bool = True
 
     def __post_init__(self):
@@ -159,6 +167,8 @@ class SolverXPBDConfig:
             if not isinstance(v, bool):
                 raise ValueError(f"SolverXPBDConfig.{name} must be a bool, got {v!r}")
         _check_positive("frame_inertia_scale", self.frame_inertia_scale)
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"SolverXPBDConfig.schedule must be one of {SCHEDULES}, got {self.schedule!r}")
         if self.frame_inertia not in FRAME_INERTIAS:
             raise ValueError(f"SolverXPBDConfig.frame_inertia must be one of {FRAME_INERTIAS}, "
                              f"got {self.frame_inertia!r}")
@@ -227,6 +237,11 @@ class SolverXPBD:
         self.config = config or SolverXPBDConfig()
         if not isinstance(self.config, SolverXPBDConfig):
             raise ValueError(f"SolverXPBD: config must be a SolverXPBDConfig, got {type(self.config).__name__}")
+        schedule = self.config.schedule
+        if schedule == "auto":
+            schedule = "stage" if ti.lang.impl.current_cfg().arch in _GPU_ARCHS else "strand"
+        #: Resolved schedule: "stage" (one launch per substep, parallel over vertices) or "strand".
+        self.schedule = schedule
         self.buf = XPBDBuffers(model.vertex_count)
         self._bad = ti.field(ti.i32, ())
         self._set_coefficients()
@@ -313,7 +328,10 @@ class SolverXPBD:
         damping = 1.0 / dts  # gamma = tau / dt_s, tau stored per constraint
         decay = math.exp(-cfg.damping * dts)
         xc.begin_step(m, m, m, control.body_rotation, control.body_translation, state, state, b)
-        for k in range(n_sub):
+        if self.schedule == "strand":
+            xc.substeps_strand(m, m, m, m, state, b, g, v_air, cfg.air_viscosity, dts, dts * dts, n_sub,
+                               cfg.iterations, damping, decay)
+        for k in range(n_sub if self.schedule == "stage" else 0):
             fraction = (k + 1) / n_sub
             if cfg.iterations <= _FUSED_ITERATIONS:
                 # (a-c) in one launch, the sweeps unrolled.

@@ -360,6 +360,62 @@ def substep(
 
 
 @ti.kernel
+def substeps_strand(
+    vertex: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    vs: ti.template(),
+    buf: ti.template(),
+    gravity: vec3,
+    air_velocity: vec3,
+    air_viscosity: float,
+    dt: float,
+    dt2: float,
+    substeps: ti.i32,
+    iterations: ti.i32,
+    damping: float,
+    decay: float,
+):
+    """All substeps of a step in one launch, parallel over strands ("strand" schedule, for CPUs).
+
+    Each strand runs the same per-element functions in the same order as :func:`substep` (strands
+    share no unknown, so a strand may run all its substeps before another starts); the colors become
+    serial passes over the strand.
+    """
+    for s in strand.strand_vertex_start:
+        a = strand.strand_vertex_start[s]
+        c = strand.strand_vertex_count[s]
+        for k in range(substeps):
+            fraction = ti.cast(k + 1, float) / ti.cast(substeps, float)
+            for i in range(a, a + c):
+                record_constraints_at(i, edge, pair, vs.vertex_position, buf)
+            for i in range(a, a + c):
+                predict_vertex_at(i, vertex, vs, buf, gravity, air_velocity, air_viscosity, dt, fraction)
+            for i in range(a, a + c):
+                predict_frame_at(i, edge, vs.vertex_position, buf, dt, fraction)
+            for _ in range(iterations):
+                for j in range((c - 1) // 2):  # bend-twist, pairs at even vertices (local 2, 4, ...)
+                    i = a + 2 + 2 * j
+                    if pair.pair_is_active[i] != 0:
+                        solve_bend_twist_at(i, buf, dt2, damping)
+                for j in range(c // 2):  # bend-twist, pairs at odd vertices (local 1, 3, ...)
+                    i = a + 1 + 2 * j
+                    if pair.pair_is_active[i] != 0:
+                        solve_bend_twist_at(i, buf, dt2, damping)
+                for j in range((c + 1) // 2):  # stretch-shear, even local edges
+                    i = a + 2 * j
+                    if edge.edge_rest_length[i] > 0.0:
+                        solve_stretch_shear_at(i, edge, vs.vertex_position, buf, dt2, damping)
+                for j in range(c // 2):  # stretch-shear, odd local edges
+                    i = a + 1 + 2 * j
+                    if edge.edge_rest_length[i] > 0.0:
+                        solve_stretch_shear_at(i, edge, vs.vertex_position, buf, dt2, damping)
+            for i in range(a, a + c):
+                update_velocity_at(i, edge, vs, buf, dt, decay)
+
+
+@ti.kernel
 def predict(
     vertex: ti.template(),
     edge: ti.template(),
