@@ -8,9 +8,13 @@ apart), the throughput in million vertex-iterations per second
 (vertices x substeps x iterations / time), and, as a quality proxy, the mean
 and largest relative edge stretch at the end.
 
+Each setting runs with both schedules (``--schedules stage,strand``): one
+launch per substep parallel over vertices, or one launch per step parallel
+over strands (the CPU default).
+
 Usage:
     python benchmarks/bench_xpbd.py [--arch cpu|cuda] [--strands 1000] [--vertices 32]
-                                    [--settings 20x1,50x1,10x5] [--steps N] [--out FILE]
+                                    [--settings 20x1,50x1,10x5] [--schedules stage,strand] [--steps N] [--out FILE]
 
 Figures are printed and written as JSON (default benchmarks/results/xpbd_<arch>.json).
 """
@@ -57,7 +61,7 @@ def machine() -> dict:
     return info
 
 
-def bench(ti, strands, vertices, settings, steps):
+def bench(ti, strands, vertices, settings, steps, schedules):
     from taichi_hair.scenes import nod_rotation
     from taichi_hair.solver_xpbd import SolverXPBD, SolverXPBDConfig
 
@@ -65,11 +69,12 @@ def bench(ti, strands, vertices, settings, steps):
     state, control = model.state(), model.control()
     snapshot = state.to_numpy()
     rows = []
-    print(f"{'strands':>7} x {'m':<3} {'vertices':>9} {'substeps':>8} {'iters':>5} {'ms/step':>10} "
+    print(f"{'strands':>7} x {'m':<3} {'vertices':>9} {'schedule':>8} {'substeps':>8} {'iters':>5} {'ms/step':>10} "
           f"{'compile_s':>10} {'Mvert-it/s':>10} {'str_mean%':>9} {'str_max%':>8}")
-    for substeps, iterations in settings:
+    for schedule, (substeps, iterations) in [(sc, st) for sc in schedules for st in settings]:
         state.load(snapshot)
-        solver = SolverXPBD(model, SolverXPBDConfig(substeps=substeps, iterations=iterations, damping=1.0))
+        solver = SolverXPBD(model, SolverXPBDConfig(substeps=substeps, iterations=iterations, damping=1.0,
+                                                    schedule=schedule))
         t = 0.0
 
         def step():
@@ -95,11 +100,13 @@ def bench(ti, strands, vertices, settings, steps):
         stretch = np.abs(solver.edge_stretch(state)[model.host["edge_rest_length"] > 0])
         throughput = model.vertex_count * substeps * iterations / seconds / 1e6
         rows.append({"strands": model.strand_count, "vertices_per_strand": vertices, "vertices": model.vertex_count,
-                     "substeps": substeps, "iterations": iterations, "steps_timed": steps, "dt": DT,
+                     "schedule": solver.schedule, "substeps": substeps, "iterations": iterations,
+                     "steps_timed": steps, "dt": DT,
                      "ms_per_step": 1e3 * seconds, "compile_and_first_step_s": compile_s,
                      "mega_vertex_iterations_per_s": throughput, "steps_run": 3 + steps,
                      "edge_stretch_mean": float(stretch.mean()), "edge_stretch_max": float(stretch.max())})
-        print(f"{strands:>7} x {vertices:<3} {model.vertex_count:>9} {substeps:>8} {iterations:>5} "
+        print(f"{strands:>7} x {vertices:<3} {model.vertex_count:>9} {solver.schedule:>8} {substeps:>8} "
+              f"{iterations:>5} "
               f"{1e3 * seconds:10.2f} {compile_s:10.2f} {throughput:10.2f} {100 * stretch.mean():9.3f} "
               f"{100 * stretch.max():8.2f}", flush=True)
     return rows
@@ -112,6 +119,7 @@ def main(argv=None):
     p.add_argument("--vertices", type=int, default=32)
     p.add_argument("--settings", default="20x1,50x1,10x5", help="comma list of SUBSTEPSxITERATIONS")
     p.add_argument("--steps", type=int, default=10)
+    p.add_argument("--schedules", default="stage,strand", help="comma list of SolverXPBDConfig.schedule values")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     settings = [tuple(int(v) for v in s.split("x")) for s in args.settings.split(",")]
@@ -120,7 +128,7 @@ def main(argv=None):
 
     ti.init(arch=ti.cpu if args.arch == "cpu" else ti.cuda, default_fp=ti.f32, offline_cache=True,
             log_level=ti.WARN)
-    rows = bench(ti, args.strands, args.vertices, settings, args.steps)
+    rows = bench(ti, args.strands, args.vertices, settings, args.steps, args.schedules.split(","))
     out = args.out or os.path.join(HERE, "results", f"xpbd_{args.arch}.json")
     os.makedirs(os.path.dirname(out), exist_ok=True)
     command = " ".join(["python", "benchmarks/bench_xpbd.py"] + (argv or sys.argv[1:]))
