@@ -72,6 +72,15 @@ step go wild (160 % stretch, frames flip by 2 pi), 100 stay bounded over
 the 8-edge cantilever sags 38x / 4.6x / 1.5x / 1.1x the converged answer with
 30 / 100 / 300 / 1000 substeps; 16 edges 8.4x / 1.7x with 300 / 1000), is
 the weakness of purely local solvers that Daviet 2023, Sec. 4.2, describes.
+Heavier frames trade dynamics (extra rotational inertia) for stability;
+measured, same cantilever, 60 undamped steps, largest edge stretch with
+10 / 30 substeps: ``frame_inertia_scale`` 0.01: 296x / 37x; 1: 2.8x (frames
+flip by 2 pi) / 0.19; 100: 0.45 / 0.020.
+
+Schedules (``SolverXPBDConfig.schedule``): "stage" launches one kernel per
+substep, each color a loop over all vertices (GPU); "strand" runs all the
+substeps of a step in one kernel, parallel over strands (CPU default).  Same
+per-element functions in the same order per strand.
 
 Nothing is allocated in ``step()``; no atomics, so CPU reruns are bitwise identical.
 """
