@@ -21,12 +21,16 @@ Typical use::
     solver.step(state, control, dt=1 / 96)
 """
 
-from .config import RodMaterial, SolverADMMConfig
+from .config import ContactConfig, RodMaterial, SolverADMMConfig
 from .builder import GroomBuilder
 from .model import Model
 from .state import State, Control
 from .solver_admm import SolverADMM
 from .errors import SimulationDivergedError
+from .colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
+from .solver_shape import ShapeCapsuleCollider, ShapeRegion, ShapeSphereCollider, SolverShape, SolverShapeConfig
+from .skinning import SkinningConfig, SkinningLBS, build_guides, compute_binding, error_colors, \
+    interpolation_error, select_guides
 
 __all__ = [
     "RodMaterial",
@@ -37,5 +41,23 @@ __all__ = [
     "Control",
     "SolverADMM",
     "SimulationDivergedError",
+    "ContactConfig",
+    "PlaneCollider",
+    "SphereCollider",
+    "CapsuleCollider",
+    "MeshCollider",
+    "ColliderSet",
+    "SolverShape",
+    "SolverShapeConfig",
+    "ShapeRegion",
+    "ShapeSphereCollider",
+    "ShapeCapsuleCollider",
+    "SkinningConfig",
+    "SkinningLBS",
+    "build_guides",
+    "compute_binding",
+    "select_guides",
+    "interpolation_error",
+    "error_colors",
 ]
 __version__ = "0.1.0"

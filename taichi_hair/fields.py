@@ -246,6 +246,9 @@ class GridFields:
         #: (x, y, z, x+-y, x+-z, y+-z, unnormalised) [m].
         self.edge_dop_center = ti.field(vec3, n)
         self.edge_dop_extent = ti.field(vec9, n)
+        #: Mean velocity of each edge's two vertices [m/s] and half their difference (spread) [m/s].
+        self.edge_velocity = ti.field(vec3, n)
+        self.edge_velocity_spread = ti.field(float, n)
         #: The closest colliding edges of each edge, sorted by distance: other edge [-] and distance [m],
         #: shape (vertex_count, candidates_per_edge); and their number, shape (vertex_count,).
         self.edge_candidate = ti.field(ti.i32, (n, k))
@@ -255,7 +258,7 @@ class GridFields:
         self.edge_emit_count = ti.field(ti.i32, n + 1)
         #: Body contacts emitted by each vertex, then their prefix sum [-], shape (vertex_count + 1,).
         self.vertex_body_emit_count = ti.field(ti.i32, n + 1)
-        #: Scalars: cell size [m], detection margin [m], largest edge length [m], largest speed [m/s].
+        #: Scalars: cell size [m], largest edge length [m], largest edge speed |v_e| + spread [m/s].
         self.cell_size = ti.field(float, ())
         self.max_edge_length = ti.field(float, ())
         self.max_speed = ti.field(float, ())

@@ -106,16 +106,21 @@ def bucket_of(cell, table_size: ti.i32) -> ti.i32:
 
 @ti.kernel
 def compute_edge_bounds(edge: ti.template(), x: ti.template(), v: ti.template(), grid: ti.template()):
-    """DOPs of every real edge; the largest current edge length [m] and vertex speed [m/s] (atomic max)."""
+    """DOPs, mean velocities and velocity spreads of every real edge; the largest edge length [m] and
+    edge speed |v_e| + spread [m/s] (atomic max: deterministic)."""
     grid.max_edge_length[None] = 0.0
     grid.max_speed[None] = 0.0
     for i in x:
-        ti.atomic_max(grid.max_speed[None], v[i].norm())
         if edge.edge_rest_length[i] > 0.0:
             half = 0.5 * (x[i + 1] - x[i])
             grid.edge_dop_center[i] = x[i] + half
             grid.edge_dop_extent[i] = dop_extent(half)
             ti.atomic_max(grid.max_edge_length[None], 2.0 * half.norm())
+            ve = 0.5 * (v[i] + v[i + 1])
+            spread = 0.5 * (v[i + 1] - v[i]).norm()
+            grid.edge_velocity[i] = ve
+            grid.edge_velocity_spread[i] = spread
+            ti.atomic_max(grid.max_speed[None], ve.norm() + spread)
 
 
 @ti.kernel
@@ -147,8 +152,16 @@ def build_hash_grid(edge: ti.template(), grid: ti.template(), h: float):
 
 @ti.kernel
 def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
-                    grid: ti.template(), h: float, margin: float):
-    """Keep, per edge, the closest colliding edges (distance < r_a + r_b + margin), at most K, sorted.
+                    grid: ti.template(), h: float, margin: float, sweep: float, fall: float):
+    """Keep, per edge, the closest colliding edges, at most K, sorted by (distance, index).
+
+    Two edges collide when their distance is below their reach
+    r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) + fall, with v the
+    edges' mean velocities, s their spreads, sweep = velocity_margin dt and
+    fall = velocity_margin |g| dt^2 (one edge may be supported while the other
+    falls): a bound on how much closer they can get during the step, from
+    their *relative* motion (hair moving together needs little margin).  The cell size h must exceed the
+    longest edge plus the largest reach.
 
     Edges of the same strand that share a vertex are skipped.  A bucket reached
     twice (two neighbouring cells hashing alike) or an edge met twice is
@@ -165,18 +178,19 @@ def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template()
             sa = vertex.vertex_strand[a]
             cell = cell_of(ca, h)
             count = 0
-            for dx in ti.static(range(-1, 2)):
-                for dy in ti.static(range(-1, 2)):
-                    for dz in ti.static(range(-1, 2)):
-                        b_idx = bucket_of(cell + ti.Vector([dx, dy, dz]), t)
-                        for e in range(grid.grid_cell_start[b_idx], grid.grid_cell_start[b_idx + 1]):
-                            b = grid.grid_entry[e]
-                            if b != a and not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
-                                reach = ra + radius[b] + margin
-                                if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
-                                    s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-                                    if dist < reach:
-                                        count = _insert_candidate(grid, a, b, dist, count, K)
+            for nb in range(27):  # a runtime loop: 27 unrolled copies made the kernel slow to compile
+                off = ti.Vector([nb // 9 - 1, (nb // 3) % 3 - 1, nb % 3 - 1])
+                b_idx = bucket_of(cell + off, t)
+                for e in range(grid.grid_cell_start[b_idx], grid.grid_cell_start[b_idx + 1]):
+                    b = grid.grid_entry[e]
+                    if b != a and not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
+                        rel = (grid.edge_velocity[a] - grid.edge_velocity[b]).norm()
+                        rel += grid.edge_velocity_spread[a] + grid.edge_velocity_spread[b]
+                        reach = ra + radius[b] + margin + sweep * rel + fall
+                        if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
+                            s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+                            if dist < reach:
+                                count = _insert_candidate(grid, a, b, dist, count, K)
             grid.edge_candidate_count[a] = count
 
 

@@ -59,3 +59,24 @@ def test_bad_arguments_give_one_line_errors(tmp_path):
     assert proc.stderr.strip().splitlines()[-1].startswith("error: HangScene.strands")
     proc = run_cli("simulate", "nowhere", "--out", str(tmp_path / "x"))
     assert proc.returncode == 2 and "unknown scene" in proc.stderr
+
+
+def test_simulate_hairball_runs_with_contacts_and_reports_them(tmp_path):
+    out = tmp_path / "hairball"
+    proc = run_cli("simulate", "hairball", "--strands", "40", "--length", "0.1", "--frames", "3", "--profile",
+                   "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "contacts" in proc.stdout and "stage breakdown" in proc.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["frames"] == 3 and summary["diverged"] is None
+    assert summary["max_penetration_m"] < 3.7e-5  # less than one hair radius
+    assert "projection" in summary["stage_ms_per_step"] and "detection" in summary["stage_ms_per_step"]
+    pos = np.load(out / "frames.npz")["positions"]
+    assert np.all(np.isfinite(pos))
+    # Roots stay on the ball (radius 9 cm) and no vertex ends inside it by more than the hair radius.
+    assert np.linalg.norm(pos[-1], axis=1).min() > 0.09 - 1e-4
+
+
+def test_unknown_scene_is_one_line_error(tmp_path):
+    proc = run_cli("simulate", "nope", "--out", str(tmp_path))
+    assert proc.returncode == 2 and "unknown scene" in proc.stderr and "Traceback" not in proc.stderr

@@ -168,12 +168,17 @@ def test_rod_resting_on_a_plane_stays_there():
 
 
 def _incline_run(angle_deg, mu, steps=48, dt=1 / 240):
-    """A short free rod lying along the slope of an inclined plane (through the origin)."""
+    """A free rod (5 cm, 1 cm edges) lying along the slope of an inclined plane (through the origin).
+
+    1 cm edges keep W_z = m / dt~^2 within a few times m / dt^2 (dt~ of Sec. 4.5 shrinks with the edge
+    length squared); with 2 mm edges W_z is ~1700 m/dt^2 and 20 ADMM iterations recover only ~1 % of
+    the sliding motion (measured), which is the paper's weight choice, not a bug in the friction law.
+    """
     a = math.radians(angle_deg)
     down = np.array([math.cos(a), -math.sin(a), 0.0])
     normal = np.array([math.sin(a), math.cos(a), 0.0])
     b = GroomBuilder()
-    pts = line(-0.005 * down, 0.005 * down, 6) + R * normal
+    pts = line(-0.025 * down, 0.025 * down, 6) + R * normal
     b.add_strand(pts, HAIR, root="free")
     model = b.finalize()
     st, ctl = model.state(), model.control()
