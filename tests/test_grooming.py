@@ -349,3 +349,16 @@ def test_contacts_on_a_sphere_collider():
     assert dist.min() > radius - 1e-3  # no vertex sank into the sphere
     assert np.sum(dist < radius + 2e-3) >= 2  # and the strand lies on it
     assert x[-1, 1] > -0.065  # held above the free sag of its tip
+
+
+def test_simulation_off_leaves_the_groom_alone():
+    s = session()
+    before = s.groom.copy()
+    s.simulate(False)
+    s.advance(3)  # logged, but nothing is built or stepped
+    assert s.rebuild_count == 0 and same_groom(s.groom, before)
+    assert s.log[-2:] == [{"action": "simulate", "on": False}, {"action": "advance", "frames": 3}]
+    with pytest.raises(ValueError, match="frames"):
+        s.advance(0)
+    with pytest.raises(ValueError, match="'on'"):
+        s.simulate("yes")
