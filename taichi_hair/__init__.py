@@ -28,6 +28,8 @@ from .state import State, Control
 from .solver_admm import SolverADMM
 from .errors import SimulationDivergedError
 from .colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
+from .solver_xpbd import SolverXPBD, SolverXPBDConfig
+from .grooming import GroomingConfig, GroomingSession
 from .solver_shape import ShapeCapsuleCollider, ShapeRegion, ShapeSphereCollider, SolverShape, SolverShapeConfig
 from .skinning import SkinningConfig, SkinningLBS, build_guides, compute_binding, error_colors, \
     interpolation_error, select_guides
@@ -48,6 +50,10 @@ __all__ = [
     "MeshCollider",
     "ColliderSet",
     "SolverShape",
+    "SolverXPBD",
+    "SolverXPBDConfig",
+    "GroomingConfig",
+    "GroomingSession",
     "SolverShapeConfig",
     "ShapeRegion",
     "ShapeSphereCollider",

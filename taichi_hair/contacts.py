@@ -305,6 +305,8 @@ class ContactPipeline:
         # The velocity part of the reach is capped at one longest edge, so the cells (and the cost of the
         # 27-cell query) stay about two edges wide; faster relative motion can tunnel within a step, as in
         # the paper's proximity-only mode (continuous-time detection is not implemented).
+        # Body contacts keep the full margin (it does not change the grid); hair-hair pairs get it capped.
+        body_sweep, body_fall = sweep, fall
         motion = sweep * 2.0 * speed + fall
         if motion > max_edge > 0.0:
             sweep *= max_edge / motion
@@ -312,12 +314,14 @@ class ContactPipeline:
             motion = max_edge
         self.motion_capped = motion >= max_edge
         reach = 2.0 * self.max_radius + margin + motion
-        cell = max(max_edge + reach, 1e-9) * 1.0001
+        cell = max(0.5 * max_edge, 1e-9)
+        extent = (0.5 * max_edge + reach) * 1.0001
         if cfg.hair_hair:
             build_hash_grid(m, g, cell)
-            find_candidates(m, m, x, self.vertex_radius, g, cell, margin, sweep, fall)
+            find_candidates(m, m, x, self.vertex_radius, g, cell, margin, sweep, fall, self.max_radius, extent)
         else:
             g.edge_candidate_count.fill(0)
+        sweep, fall = body_sweep, body_fall
         while True:
             count_contacts(m, x, v, self.vertex_radius, g, self.colliders, margin, sweep, fall)
             write_contacts(m, m, x, v, self.vertex_radius, g, self.colliders, self.con, cfg.friction, margin,

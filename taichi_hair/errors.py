@@ -22,5 +22,5 @@ class SimulationDivergedError(RuntimeError):
         super().__init__(
             f"simulation diverged at step {step}: strand {strand} has a non-finite {field}; "
             "the state was restored to the beginning of the step (try a smaller time step, "
-            "more ADMM iterations, or check the material parameters)"
+            "more solver iterations or substeps, or check the material parameters)"
         )

@@ -240,6 +240,11 @@ class GridFields:
         self.grid_cell_cursor = ti.field(ti.i32, t)
         #: Edge indices sorted by bucket [-], shape (vertex_count,).
         self.grid_entry = ti.field(ti.i32, n)
+        #: Copies of the DOP centre [m], DOP extents [m] and velocity (mean [m/s], spread [m/s]) of each
+        #: entry, in bucket order, so the candidate search reads memory sequentially.
+        self.grid_entry_center = ti.field(vec3, n)
+        self.grid_entry_extent = ti.field(vec9, n)
+        self.grid_entry_velocity = ti.field(ti.types.vector(4, float), n)
         #: Bucket of each edge, -1 for ghost edges [-].
         self.edge_bucket = ti.field(ti.i32, n)
         #: 18-DOP of each edge in 12 floats: centre [m] and half-extents along the 9 DOP axes

@@ -4,9 +4,10 @@
    midpoint and 9 half-extents, since a segment's DOP is symmetric about its
    midpoint, as the paper notes), the largest edge length and speed.
 2. ``build_hash_grid``: a counting sort of edge midpoints into the buckets of
-   a spatial hash with cell size h >= longest edge + contact distance, so two
-   edges within contact distance have midpoints in neighbouring cells.
-3. ``find_candidates``: each edge visits the 27 neighbouring cells, culls with
+   a spatial hash with cells of half the longest edge.
+3. ``find_candidates``: each edge visits the cells its own bounding box,
+   grown by half the longest edge plus the largest reach, overlaps (every
+   edge within reach has its midpoint there), culls with
    the DOPs, computes the closest points of the two segments, and keeps the
    ``candidates_per_edge`` (6 in the paper) closest colliding edges, sorted by
    (distance, index) so the result does not depend on the order of the bucket
@@ -146,13 +147,18 @@ def build_hash_grid(edge: ti.template(), grid: ti.template(), h: float):
     for i in grid.edge_bucket:
         b = grid.edge_bucket[i]
         if b >= 0:
-            slot = ti.atomic_add(grid.grid_cell_cursor[b], 1)
-            grid.grid_entry[grid.grid_cell_start[b] + slot] = i
+            slot = grid.grid_cell_start[b] + ti.atomic_add(grid.grid_cell_cursor[b], 1)
+            grid.grid_entry[slot] = i
+            grid.grid_entry_center[slot] = grid.edge_dop_center[i]
+            grid.grid_entry_extent[slot] = grid.edge_dop_extent[i]
+            ve = grid.edge_velocity[i]
+            grid.grid_entry_velocity[slot] = ti.Vector([ve[0], ve[1], ve[2], grid.edge_velocity_spread[i]])
 
 
 @ti.kernel
 def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
-                    grid: ti.template(), h: float, margin: float, sweep: float, fall: float):
+                    grid: ti.template(), h: float, margin: float, sweep: float, fall: float,
+                    max_radius: float, extent: float):
     """Keep, per edge, the closest colliding edges, at most K, sorted by (distance, index).
 
     Two edges collide when their distance is below their reach
@@ -161,7 +167,7 @@ def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template()
     fall = velocity_margin |g| dt^2 (one edge may be supported while the other
     falls): a bound on how much closer they can get during the step, from
     their *relative* motion (hair moving together needs little margin).  The cell size h must exceed the
-    longest edge plus the largest reach.
+    longest edge plus the largest reach (no longer: the query box adapts).
 
     Edges of the same strand that share a vertex are skipped.  A bucket reached
     twice (two neighbouring cells hashing alike) or an edge met twice is
@@ -176,18 +182,27 @@ def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template()
             ea = grid.edge_dop_extent[a]
             ra = radius[a]
             sa = vertex.vertex_strand[a]
-            cell = cell_of(ca, h)
+            va = grid.edge_velocity[a]
+            sa_spread = grid.edge_velocity_spread[a]
+            # Cells whose midpoints can hold a colliding edge: a's box grown by half the longest edge plus
+            # the largest reach (``extent``).  With cells of half an edge this box is ~2 x 1 x 1 edges for
+            # an edge at rest, far less than 27 cells of two edges each.
+            lo = cell_of(ti.min(x[a], x[a + 1]) - extent, h)
+            hi = cell_of(ti.max(x[a], x[a + 1]) + extent, h)
+            span = hi - lo + 1
             count = 0
-            for nb in range(27):  # a runtime loop: 27 unrolled copies made the kernel slow to compile
-                off = ti.Vector([nb // 9 - 1, (nb // 3) % 3 - 1, nb % 3 - 1])
-                b_idx = bucket_of(cell + off, t)
+            for nb in range(span[0] * span[1] * span[2]):
+                off = ti.Vector([nb // (span[1] * span[2]), (nb // span[2]) % span[1], nb % span[2]])
+                b_idx = bucket_of(lo + off, t)
                 for e in range(grid.grid_cell_start[b_idx], grid.grid_cell_start[b_idx + 1]):
                     b = grid.grid_entry[e]
-                    if b != a and not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
-                        rel = (grid.edge_velocity[a] - grid.edge_velocity[b]).norm()
-                        rel += grid.edge_velocity_spread[a] + grid.edge_velocity_spread[b]
+                    vb = grid.grid_entry_velocity[e]
+                    rel = (va - vec3(vb[0], vb[1], vb[2])).norm() + sa_spread + vb[3]
+                    # radius[b] <= max radius: bound the reach without loading edge b's data first.
+                    reach_max = ra + max_radius + margin + sweep * rel + fall
+                    if b != a and dops_overlap(ca, ea, grid.grid_entry_center[e], grid.grid_entry_extent[e], reach_max):
                         reach = ra + radius[b] + margin + sweep * rel + fall
-                        if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
+                        if not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
                             s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
                             if dist < reach:
                                 count = _insert_candidate(grid, a, b, dist, count, K)
