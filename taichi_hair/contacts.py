@@ -273,7 +273,6 @@ class ContactPipeline:
         capacity = max(16, int(config.capacity_per_vertex * n))
         self.con = ContactFields(capacity, n)
         self.stats_out = ti.field(float, 4)
-        self.last_max_displacement = 0.0
         self.grow_events = 0
         self.detections = 0
 
@@ -312,7 +311,6 @@ class ContactPipeline:
             sweep *= max_edge / motion
             fall *= max_edge / motion
             motion = max_edge
-        self.motion_capped = motion >= max_edge
         reach = 2.0 * self.max_radius + margin + motion
         cell = max(0.5 * max_edge, 1e-9)
         extent = (0.5 * max_edge + reach) * 1.0001

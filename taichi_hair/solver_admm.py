@@ -32,11 +32,11 @@ The step allocates nothing: all buffers are created in ``__init__``.
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import taichi as ti
 
+from .profiling import StageTimer
 from . import admm
 from .config import SolverADMMConfig
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, solve_local_elasticity
@@ -57,7 +57,7 @@ _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
 
-class SolverADMM:
+class SolverADMM(StageTimer):
     """ADMM local-global integrator for Discrete Elastic Rods (Daviet 2023).
 
     Args:
@@ -303,18 +303,3 @@ class SolverADMM:
         x = state.vertex_position.to_numpy().astype(np.float64)
         grav = -float(np.sum(h["vertex_mass"][:, None] * x * np.asarray(control.gravity)[None, :]))
         return {"bend": bend, "stretch": stretch, "gravity": grav, "total": bend + stretch + grav}
-
-    # ------------------------------------------------------------------ timing
-    def _tick(self) -> float:
-        if self.profile:
-            ti.sync()
-            return time.perf_counter()
-        return 0.0
-
-    def _tock(self, stage: str, t0: float) -> float:
-        if self.profile:
-            ti.sync()
-            t1 = time.perf_counter()
-            self.stage_seconds[stage] += t1 - t0
-            return t1
-        return 0.0

@@ -66,12 +66,12 @@ The step allocates nothing: all fields are created in ``__init__``.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import taichi as ti
 
+from .profiling import StageTimer
 from . import shape_constraints as sc
 from .errors import SimulationDivergedError
 from .model import Model, _np_float
@@ -229,7 +229,7 @@ def _collider_kind(c):
     return None
 
 
-class SolverShape:
+class SolverShape(StageTimer):
     """Position-based hair solver with global and local shape constraints (Han & Harada 2012).
 
     Args:
@@ -474,18 +474,3 @@ class SolverShape:
         if code >= 0:
             sc.restore_begin(self, state.vertex_position, state.vertex_velocity)
             raise SimulationDivergedError(code // 2, _FIELD_NAMES[code % 2], self.step_count)
-
-    # ------------------------------------------------------------------ timing
-    def _tick(self) -> float:
-        if self.profile:
-            ti.sync()
-            return time.perf_counter()
-        return 0.0
-
-    def _tock(self, stage: str, t0: float) -> float:
-        if self.profile:
-            ti.sync()
-            t1 = time.perf_counter()
-            self.stage_seconds[stage] += t1 - t0
-            return t1
-        return 0.0
