@@ -233,16 +233,39 @@ class ContactPipeline:
     """
 
     def __init__(self, model, config, colliders=None):
-        import numpy as np
-
         from .colliders import ColliderSet
         from .fields import ContactFields, GridFields
-        from .model import _np_float
 
         self.model = model
         self.config = config
         self.colliders = colliders if colliders is not None else ColliderSet([], model.body_count)
         n = model.vertex_count
+        #: Contact radius of each vertex/edge (its strand's radius) [m], shape (vertex_count,).
+        self.vertex_radius = ti.field(float, n)
+        #: m_i, for W_z = m_i / dt~^2 [kg], shape (vertex_count,).
+        self.vertex_weight_base = ti.field(float, n)
+        #: Typical edge length L~ of the vertex's strand [m], shape (vertex_count,).
+        self.vertex_typical_length = ti.field(float, n)
+        #: Bending time 2 L~^2/R sqrt(rho/E_b) of the vertex's strand (Sec. 4.5) [s], shape (vertex_count,).
+        self.vertex_dt_bend = ti.field(float, n)
+        self.set_coefficients()
+        table = 1
+        while table < 2 * n:
+            table *= 2
+        self.grid = GridFields(n, table, config.max_contacts_per_edge)
+        capacity = max(16, int(config.capacity_per_vertex * n))
+        self.con = ContactFields(capacity, n)
+        self.stats_out = ti.field(float, 4)
+        self.grow_events = 0
+        self.detections = 0
+
+    def set_coefficients(self) -> None:
+        """(Re)compute the per-vertex contact coefficients from the Model (after an in-place Model update)."""
+        import numpy as np
+
+        from .model import _np_float
+
+        model = self.model
         h = model.host
         f = _np_float()
         strand = h["vertex_strand"]
@@ -254,27 +277,11 @@ class ContactPipeline:
         counts = np.bincount(strand, weights=(le > 0).astype(float), minlength=model.strand_count)
         sums = np.bincount(strand, weights=le, minlength=model.strand_count)
         typical = (sums / np.maximum(counts, 1))[strand]
-        #: Contact radius of each vertex/edge (its strand's radius) [m], shape (vertex_count,).
-        self.vertex_radius = ti.field(float, n)
         self.vertex_radius.from_numpy(radius.astype(f))
-        #: m_i, for W_z = m_i / dt~^2 [kg], shape (vertex_count,).
-        self.vertex_weight_base = ti.field(float, n)
         self.vertex_weight_base.from_numpy(np.maximum(h["vertex_mass"], 1e-30).astype(f))
-        #: Typical edge length L~ of the vertex's strand [m]; bending time 2 L~^2/R sqrt(rho/E_b) [s].
-        self.vertex_typical_length = ti.field(float, n)
         self.vertex_typical_length.from_numpy(typical.astype(f))
-        self.vertex_dt_bend = ti.field(float, n)
         self.vertex_dt_bend.from_numpy((2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f))
         self.max_radius = float(radius.max())
-        table = 1
-        while table < 2 * n:
-            table *= 2
-        self.grid = GridFields(n, table, config.max_contacts_per_edge)
-        capacity = max(16, int(config.capacity_per_vertex * n))
-        self.con = ContactFields(capacity, n)
-        self.stats_out = ti.field(float, 4)
-        self.grow_events = 0
-        self.detections = 0
 
     @property
     def contact_count(self) -> int:

@@ -47,6 +47,42 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
         self._rest_rotation = ti.Matrix.field(3, 3, float, body_count)
         self._rest_rotation.from_numpy(np.tile(np.eye(3), (body_count, 1, 1)).astype(_np_float()))
 
+    # ------------------------------------------------------------------ in-place updates
+    def update(self, host: dict, materials: list | None = None) -> None:
+        """Replace the groom's static data *in place*, keeping every field object.
+
+        ``host`` must have the same layout (vertex and strand counts, vertex-to-strand
+        map) as the current one, e.g. from a :class:`GroomBuilder` fed the edited
+        rest shape of the same strands.  Kernels are specialised per field object, so
+        updating in place avoids recompiling them (the grooming tool edits rest
+        shapes, lengths and parameters this way).  Solvers built on this Model must
+        then call their ``refresh_model()``.
+        """
+        for key in ("vertex_strand", "strand_vertex_start", "strand_vertex_count"):
+            if key not in host or not np.array_equal(np.asarray(host[key]), self.host[key]):
+                raise ValueError(f"Model.update: host[{key!r}] differs from the model's; the layout "
+                                 "(vertex and strand counts) must stay the same for an in-place update")
+        if materials is not None and len(materials) != self.strand_count:
+            raise ValueError(f"Model.update: {len(materials)} materials for {self.strand_count} strands")
+        for name, value in host.items():
+            field = getattr(self, name, None)
+            if isinstance(field, ti.Field):
+                field.from_numpy(np.ascontiguousarray(value, dtype=_np_dtype(field)))
+        self.host = host
+        if materials is not None:
+            self.materials = materials
+
+    def reset_state(self, state: State) -> None:
+        """Put ``state`` (allocated by :meth:`state`) back at rest, in place (no new fields)."""
+        state.vertex_position.copy_from(self.vertex_rest_position)
+        state.vertex_velocity.fill(0.0)
+        state.edge_twist.copy_from(self.edge_rest_twist)
+        state.edge_angular_velocity.fill(0.0)
+        state.edge_tangent.from_numpy(self.host["edge_rest_tangent"].astype(_np_float()))
+        state.edge_reference_director.copy_from(self.edge_rest_director)
+        update_reference_frames(True, self, self, self, self, self._rest_rotation, state.vertex_position,
+                                state.edge_twist, state)
+
     # ------------------------------------------------------------------ factories
     def state(self) -> State:
         """A new State at rest: input positions, zero velocities, rest twists and frames."""

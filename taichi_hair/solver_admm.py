@@ -156,9 +156,19 @@ class SolverADMM(StageTimer):
         self.buf.pair_admm_weight.from_numpy(weight.astype(f))
         self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
         self.host_pair_voronoi_bend = vstar
-        rest = m.state()
+        if getattr(self, "_rest_state", None) is None:
+            self._rest_state = m.state()
+        else:
+            m.reset_state(self._rest_state)
+        rest = self._rest_state
         admm.compute_strains(self.measure, m, m, rest.vertex_position, rest.edge_twist, rest,
                              self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
+
+    def refresh_model(self) -> None:
+        """Recompute everything derived from the Model after :meth:`Model.update` (no new fields)."""
+        self._set_coefficients()
+        if self.contacts is not None:
+            self.contacts.set_coefficients()
 
     # ------------------------------------------------------------------ stepping
     def step(self, state: State, control: Control, dt: float) -> None:
@@ -281,6 +291,40 @@ class SolverADMM(StageTimer):
     def reset_duals(self) -> None:
         """Forget the warm-started elasticity multipliers (e.g. after a teleport)."""
         admm.reset_duals(self.buf)
+
+    def checkpoint(self) -> dict:
+        """What the solver carries from one step to the next, as NumPy arrays.
+
+        Together with ``State.to_numpy()`` this is everything a later step
+        depends on: the warm-started elasticity duals lambda_y and the forces
+        they give, and the step/iteration counters.  Contacts are detected
+        afresh each step, so they hold nothing across steps.
+        """
+        snap = {"pair_dual": self.buf.pair_dual.to_numpy(), "pair_force": self.buf.pair_force.to_numpy(),
+                "step_count": np.int64(self.step_count), "iteration_count": np.int64(self.iteration_count)}
+        if self.contacts is not None:
+            cs = self.contacts.colliders
+            # The previous step's end transforms become the next step's begin transforms (collider velocity).
+            snap["collider_has_begin"] = np.int64(cs.has_begin)
+            snap["collider_rotation_end"] = cs.body_rotation_end.to_numpy()
+            snap["collider_translation_end"] = cs.body_translation_end.to_numpy()
+        return snap
+
+    def restore(self, snapshot: dict) -> None:
+        """Load what :meth:`checkpoint` returned (same Model layout)."""
+        n = self.model.vertex_count
+        for key in ("pair_dual", "pair_force"):
+            a = np.asarray(snapshot[key])
+            if a.shape != (n, 6):
+                raise ValueError(f"SolverADMM.restore: {key} has shape {a.shape}, expected {(n, 6)}")
+            getattr(self.buf, key).from_numpy(a.astype(getattr(self.buf, key).to_numpy().dtype))
+        self.step_count = int(snapshot["step_count"])
+        self.iteration_count = int(snapshot["iteration_count"])
+        if self.contacts is not None and "collider_has_begin" in snapshot:
+            cs = self.contacts.colliders
+            cs.has_begin = bool(snapshot["collider_has_begin"])
+            cs.body_rotation_end.from_numpy(np.asarray(snapshot["collider_rotation_end"]))
+            cs.body_translation_end.from_numpy(np.asarray(snapshot["collider_translation_end"]))
 
     # ------------------------------------------------------------------ diagnostics
     def energy(self, state: State, control: Control) -> dict:

@@ -1,0 +1,1 @@
+"""Speed-against-accuracy studies: ``taichi-hair bench pareto`` and ``taichi-hair bench stability``."""
