@@ -27,11 +27,18 @@ by :meth:`~GroomingSession.replay`):
   frame by frame, with time constant -1/ln(1 - stiffness) frames.  The rest of
   each strand follows through elasticity and contacts.  :meth:`release` ends it.
 * :meth:`trim` cuts the strands whose *current* polyline crosses a plane (the
-  cut seen on screen); the same edge and edge parameter cut the rest pose.
+  cut seen on screen); the same rest arc length cuts the rest pose.
 * :meth:`scale_length` shortens (cut at the scaled rest arc length) or grows
   selected strands from the tip; growth continues the tip's discrete
   curvature and torsion (the screw motion taking the last-but-one edge pair to
   the last one), at the last rest edge length.
+* Both keep every strand's vertex count: the edited strand is *resampled*
+  along its new length (vertex i at the same arc fraction as before, linear
+  between the old vertices, so edges get shorter or longer by the length
+  ratio).  The layout of the simulation then never changes, and the Model is
+  updated in place instead of rebuilt.  The price: a strong growth coarsens the
+  strand (curls finer than the new edge spacing are smoothed), a strong trim
+  makes short edges (slower ADMM convergence, Sec. 6.1).
 * :meth:`scale_curl` multiplies the rest turning angle of every edge pair of
   the selected strands (the Bishop-frame curvature), keeping edge lengths and
   the root edge; 0 straightens.  The edited strands' current pose becomes the
@@ -46,22 +53,20 @@ is taken before it, so undo and redo restore the groom bit for bit.  The
 solver's warm-start state (twists, multipliers) restarts from the restored
 groom, as after loading it.
 
-Topology or rest-pose changes (trim, scale_length, scale_curl, material
-parameters) rebuild the Model and solver *lazily*, at the next frame, so a
-burst of edits costs one rebuild; live parameters (gravity, friction,
-iterations) and pins, drags and undo to the same rest pose do not rebuild.  A
-rebuild recompiles every Taichi kernel (kernels are specialised per field, and
-Taichi 1.7 keeps the old Model's fields allocated); ``session.timings``
-records it.  Measured on the shared 2-core CPU (Taichi CPU, f32, other jobs
-running), two builds per line (the second after ``scale_length(0.9)``)::
-
-    12 x 10 strands, all simulated, contacts on : build 5.4, 7.7 s; first frame 185, 179 s; later 10.5 ms
-    12 x 10 strands, all simulated, contacts off: build 4.5, 7.0 s; first frame 9.5, 7.7 s; later 0.8 ms
-    1000 x 20, 10 % guides, contacts on         : build 6.0, 5.8 s; first frame 162, 14 s; later 18.3 ms
-
-The first frame is kernel compilation; it drops to 15-25 s when Taichi's
-offline cache holds the kernels, which a shared cache does not guarantee.  An
-interactive tool needs the Model updated in place (see the report to the lead).
+Rest-pose changes (trim, scale_length, scale_curl, undo/redo across them) and
+material parameters (youngs_modulus, radius, density, w0) update the Model in
+place, *lazily* at the next frame (a burst of edits costs one update):
+:meth:`Model.update` with the host arrays a :class:`GroomBuilder` computes for
+the new rest shapes, ``SolverADMM.refresh_model`` and ``SkinningLBS.rebind``,
+all into the fields that exist already, so Taichi compiles nothing again.  The
+frames after an in-place update are bit for bit those of a new session opened
+on the edited groom (tested).  Only parameters that change which strands are
+simulated or the contact set-up (``LAYOUT_PARAMETERS``: guide_ratio,
+neighbour_count, seed, contacts, contact_margin) build a new Model and solver,
+and then Taichi recompiles every kernel (kernels are specialised per field;
+measured 8-185 s for the first frame on the shared 2-core CPU before in-place
+updates existed, 15-25 s with a warm offline cache).  ``session.timings``
+records builds (``rebuild``), in-place updates (``update``) and frames.
 
 With ``guide_ratio < 1`` a selected vertex of a skinned strand acts through its
 *proxy*: the vertex of the nearest guide (by root) at the nearest rest arc
@@ -90,12 +95,13 @@ EDIT_ACTIONS = ("drag", "release", "trim", "scale_length", "scale_curl", "pin", 
 #: Every action a session log may hold (each is a method of :class:`GroomingSession`).
 ACTIONS = ("select", "select_ray", "select_strands", "select_all", "simulate", "advance", "undo", "redo") \
     + EDIT_ACTIONS
-#: Parameters whose change rebuilds the Model and solver (the others apply to the running solver).
+#: Parameters whose change updates the Model and solver coefficients (the others apply to the running solver).
 REBUILD_PARAMETERS = ("youngs_modulus", "radius", "density", "guide_ratio", "neighbour_count", "seed", "contacts",
                       "contact_margin", "w0")
-# A cut closer than this fraction of an edge to its first vertex drops that vertex instead of
-# leaving a very short last edge (short edges slow ADMM down, Sec. 6.1).
-_MIN_EDGE_FRACTION = 0.25
+#: Of those, the ones that change the simulated layout (which strands are guides, the skinning
+#: slots, the contact pipeline): a new Model and solver are built and Taichi recompiles the kernels.
+#: The others update the Model in place (:meth:`Model.update`, no recompilation).
+LAYOUT_PARAMETERS = ("guide_ratio", "neighbour_count", "seed", "contacts", "contact_margin")
 
 
 # =========================================================================== configuration
@@ -262,33 +268,39 @@ def _tip_frame_map(rest: np.ndarray, cur: np.ndarray) -> np.ndarray:
     return _min_rotation(tr[1], tc[1])
 
 
-def _cut(cur: np.ndarray, rest: np.ndarray, j: int, u: float):
-    """Cut both poses on edge j at parameter u in (0, 1].
+def _arc(p: np.ndarray) -> np.ndarray:
+    """Cumulative arc length at every vertex of polyline p [m], shape (m,)."""
+    return np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
 
-    Returns (current, rest, source, fresh): ``source`` is the old vertex each new vertex takes
-    its attributes from, ``fresh`` marks new positions.  Keeps at least 3 vertices; a cut within
-    the first quarter of edge j (j >= 2) moves vertex j onto the cut instead of leaving a short
-    last edge; a cut on the root edge (j = 0) splits what is left of it in two.
+
+def _sample(knots: np.ndarray, points: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Points of the polyline ``points`` at arc parameters ``s``, linear between the vertices
+    (``knots`` is the parameter of each vertex, increasing).  s = knots[0] gives points[0] exactly."""
+    idx = np.clip(np.searchsorted(knots, s, side="right") - 1, 0, len(knots) - 2)
+    u = np.clip((s - knots[idx]) / (knots[idx + 1] - knots[idx]), 0.0, 1.0)
+    return points[idx] + u[:, None] * (points[idx + 1] - points[idx])
+
+
+def _resample(cur: np.ndarray, rest: np.ndarray, phi: np.ndarray, length: float, tip=None):
+    """Both poses of a strand resampled to ``len(phi)`` vertices along the first ``length`` [m] of
+    the rest polyline ``rest`` (the strand, extended beyond its tip for a growth).
+
+    Vertex i goes to the rest arc length phi_i * length, phi_i the old arc fraction of vertex i,
+    so the relative spacing is kept (uniform stays uniform) and every edge is scaled by
+    length / old length.  Both poses are parametrised by the *rest* arc length and interpolated
+    linearly, so vertex i of the current pose is the point that corresponds to vertex i of the rest
+    pose; new vertices lie on the old polylines (a corner between two old vertices is cut by the
+    new chord: the rest length is ``length`` minus that chord shortening, and a curl finer than
+    the new edge spacing is smoothed).  The root vertex is kept bit for bit.  ``tip`` (current,
+    rest) overrides the last vertex (a trim puts it exactly on the cutting plane).
     """
-    cc = cur[j] + u * (cur[j + 1] - cur[j])
-    rc = rest[j] + u * (rest[j + 1] - rest[j])
-    if j == 0:
-        return (np.array([cur[0], 0.5 * (cur[0] + cc), cc]), np.array([rest[0], 0.5 * (rest[0] + rc), rc]),
-                np.array([0, 1, 1]), np.array([False, True, True]))
-    keep = j if (u < _MIN_EDGE_FRACTION and j >= 2) else j + 1
-    src = np.r_[np.arange(keep), j if u < 0.5 else j + 1]
-    fresh = np.r_[np.zeros(keep, dtype=bool), True]
-    return np.vstack([cur[:keep], cc]), np.vstack([rest[:keep], rc]), src, fresh
-
-
-def _arc_cut(rest: np.ndarray, length: float) -> tuple[int, float]:
-    """Edge j and parameter u where the rest arc length reaches ``length`` (< total)."""
-    _, le = _tangents(rest)
-    cum = np.r_[0.0, np.cumsum(le)]
-    j = int(np.searchsorted(cum, length, side="left")) - 1
-    j = min(max(j, 0), len(le) - 1)
-    u = (length - cum[j]) / le[j]
-    return j, float(min(max(u, 1e-12), 1.0))
+    c = _arc(rest)
+    s = phi * length
+    new_cur, new_rest = _sample(c, cur, s), _sample(c, rest, s)
+    new_cur[0], new_rest[0] = cur[0], rest[0]
+    if tip is not None:
+        new_cur[-1], new_rest[-1] = tip
+    return new_cur, new_rest
 
 
 def _turning(p: np.ndarray):
@@ -339,6 +351,32 @@ def _edge_mask(offsets: np.ndarray, n: int) -> np.ndarray:
     m = np.ones(max(n - 1, 0), dtype=bool)
     m[offsets[1:-1] - 1] = False
     return m
+
+
+def _host_of(builder) -> tuple[dict, list]:
+    """``(host, materials)`` that ``builder.finalize()`` would give its Model, without allocating
+    the Model's Taichi fields (allocating them would make Taichi compile the kernels again).
+
+    GroomBuilder has no host-only finalize; this calls ``finalize`` with the module's ``Model``
+    class swapped for a capture for the duration of the call (single-threaded use only).
+    """
+    from . import builder as builder_module
+
+    class _Captured(Exception):
+        pass
+
+    def capture(host, materials, body_count):
+        raise _Captured(host, materials)
+
+    saved = builder_module.Model
+    builder_module.Model = capture
+    try:
+        builder.finalize()
+    except _Captured as got:
+        return got.args[0], got.args[1]
+    finally:
+        builder_module.Model = saved
+    raise RuntimeError("GroomBuilder.finalize returned without building its Model")
 
 
 # =========================================================================== session log parsing
@@ -392,8 +430,10 @@ class GroomingSession:
         simulating: whether :meth:`advance` steps the solver.
         log: list of ``{"action": name, **params}`` of every action so far.
         timings: lists of seconds: ``rebuild`` (Model + solver + skinning + State),
+            ``update`` (an in-place update of the Model after a rest-shape edit),
             ``first_frame`` (first frame after a rebuild: kernel compilation), ``frame``.
         rebuild_count: Models built so far [-].
+        update_count: in-place Model updates so far [-].
     """
 
     def __init__(self, groom, config: GroomingConfig | None = None, colliders=None, autosave_path=None):
@@ -425,8 +465,9 @@ class GroomingSession:
         self.autosave_path = None if autosave_path is None else os.fspath(autosave_path)
         self.simulating = True
         self.log: list[dict] = []
-        self.timings = {"rebuild": [], "first_frame": [], "frame": []}
+        self.timings = {"rebuild": [], "update": [], "first_frame": [], "frame": []}
         self.rebuild_count = 0
+        self.update_count = 0
         self._selection = np.zeros(g.vertex_count, dtype=bool)
         self._drag = None
         self._undo: list[dict] = []
@@ -511,12 +552,15 @@ class GroomingSession:
         self._drag = None if snap["drag"] is None else {k: (v.copy() if isinstance(v, np.ndarray) else v)
                                                         for k, v in snap["drag"].items()}
         self.simulating = snap["simulating"]
-        same_rest = (np.array_equal(old[0].strand_offsets, self.groom.strand_offsets)
-                     and old[0].rest_points.dtype == self.groom.rest_points.dtype
+        same_layout = (np.array_equal(old[0].strand_offsets, self.groom.strand_offsets)
+                       and np.array_equal(old[0].rest_points[old[0].strand_offsets[:-1]],
+                                          self.groom.rest_points[self.groom.strand_offsets[:-1]])
+                       and all(getattr(old[1], k) == getattr(self.config, k) for k in LAYOUT_PARAMETERS))
+        same_rest = (same_layout and old[0].rest_points.dtype == self.groom.rest_points.dtype
                      and np.array_equal(old[0].rest_points, self.groom.rest_points)
                      and all(getattr(old[1], k) == getattr(self.config, k) for k in REBUILD_PARAMETERS))
         if not same_rest:
-            self._invalidate()
+            self._invalidate(layout=not same_layout)
         elif self._sim is not None:
             self._apply_live_parameters()
             self._load_state()
@@ -714,46 +758,34 @@ class GroomingSession:
 
     # ------------------------------------------------------------------ topology edits
     def _replace_strands(self, new: dict) -> None:
-        """Swap strands s -> (current, rest, source, fresh) (see :func:`_cut`; source is local to the strand).
+        """Swap the poses of strands s -> (current, rest), each with the strand's vertex count.
 
-        Rebuilds every per-vertex array (points, rest, pinned, selection, per-vertex radius and
-        colour); unchanged strands are copied bit for bit.  Ends an active drag.
+        The layout (vertex and strand counts) is kept, so the simulation updates its Model in place
+        instead of rebuilding it; per-vertex attributes (pins, selection, radius, colour) stay on
+        their vertex index.  Unchanged strands are copied bit for bit.  Ends an active drag.
         """
         g = self.groom
         off = g.strand_offsets
-        counts = g.strand_vertex_counts().copy()
-        src = []
-        for s in range(g.strand_count):
-            if s in new:
-                counts[s] = new[s][0].shape[0]
-                src.append(off[s] + np.asarray(new[s][2], dtype=np.int64))
-            else:
-                src.append(np.arange(off[s], off[s + 1]))
-        src = np.concatenate(src)
-        new_off = np.r_[0, np.cumsum(counts)].astype(np.int64)
-        pts = g.points[src].copy()
-        rest = g.rest_points[src].copy()
-        pinned = g.pinned[src].copy()
-        sel = self._selection[src].copy()
-        for s, (cur, rp, _, fresh) in new.items():
-            a, b = new_off[s], new_off[s + 1]
+        pts = g.points.copy()
+        rest = g.rest_points.copy()
+        for s, (cur, rp) in new.items():
+            a, b = off[s], off[s + 1]
             pts[a:b] = cur.astype(pts.dtype)
             rest[a:b] = rp.astype(rest.dtype)
-            pinned[a:b][fresh] = False  # a cut point or a grown vertex is not pinned
-        ng = replace(g, points=pts, rest_points=rest, pinned=pinned, strand_offsets=new_off, params=dict(g.params))
-        if g.radius is not None and g.radius.shape[0] == g.vertex_count:
-            ng.radius = g.radius[src].copy()
-        if g.color is not None and g.color.shape[0] == g.vertex_count:
-            ng.color = g.color[src].copy()
-        self.groom = ng.validate()
-        self._selection = sel
+        self.groom = replace(g, points=pts, rest_points=rest, params=dict(g.params)).validate()
         self._drag = None
-        self._invalidate()
+        self._invalidate(layout=False)
 
     def trim(self, plane_point, plane_normal, selected_only: bool = False) -> int:
-        """Cut every strand whose current polyline crosses the plane (point, normal) [m]; the part
-        holding the root stays.  ``selected_only`` restricts it to the selected strands.  Strands
-        not crossing are untouched.  Returns the number of strands cut."""
+        """Cut every strand whose current polyline crosses the plane (point, normal) [m] at its first
+        crossing from the root; the part holding the root stays.  ``selected_only`` restricts it to
+        the selected strands.  Strands not crossing are untouched.  Returns the number of strands cut.
+
+        A cut strand keeps its vertex count: both poses are resampled along the kept part
+        (:func:`_resample`), so its edges get shorter and its last vertex lies on the plane.
+        Keeping the layout lets the solver update its Model in place (milliseconds) instead of
+        building a new one (a kernel recompilation).
+        """
         p0 = _vec3("plane_point", plane_point)
         n = _vec3("plane_normal", plane_normal)
         if np.linalg.norm(n) == 0:
@@ -762,24 +794,24 @@ class GroomingSession:
         if not isinstance(selected_only, bool):
             raise ValueError(f"'selected_only' must be true or false, got {selected_only!r}")
         g = self.groom
-        cur_all = g.points.astype(np.float64)
-        rest_all = g.rest_points.astype(np.float64)
-        dist = (cur_all - p0) @ n
-        chosen = self.strand_selection if selected_only else np.ones(g.strand_count, dtype=bool)
-        new = {}
         off = g.strand_offsets
-        for s in np.nonzero(chosen)[0]:
+        dist = (g.points.astype(np.float64) - p0) @ n
+        chosen = self.strand_selection if selected_only else np.ones(g.strand_count, dtype=bool)
+        # Candidates: strands with a vertex on the other side of the plane from their root.
+        side = np.repeat(np.sign(dist[off[:-1]]), g.strand_vertex_counts())
+        crosses = np.logical_or.reduceat(dist * side <= 0.0, off[:-1]) & (dist[off[:-1]] != 0.0) & chosen
+        new = {}
+        for s in np.nonzero(crosses)[0]:
             a, b = off[s], off[s + 1]
+            cur = g.points[a:b].astype(np.float64)
+            rest = g.rest_points[a:b].astype(np.float64)
             d = dist[a:b]
-            if d[0] == 0.0:
-                continue
-            other = np.nonzero(d * np.sign(d[0]) <= 0.0)[0]
-            if other.size == 0:
-                continue
-            k = int(other[0])
+            k = int(np.nonzero(d * np.sign(d[0]) <= 0.0)[0][0])
             j = k - 1
             u = d[j] / (d[j] - d[k])
-            new[int(s)] = _cut(cur_all[a:b], rest_all[a:b], j, float(u))
+            tip = (cur[j] + u * (cur[j + 1] - cur[j]), rest[j] + u * (rest[j + 1] - rest[j]))
+            c = _arc(rest)
+            new[int(s)] = _resample(cur, rest, c / c[-1], c[j] + u * (c[j + 1] - c[j]), tip)
 
         def apply():
             if new:
@@ -790,9 +822,17 @@ class GroomingSession:
         return len(new)
 
     def scale_length(self, factor) -> None:
-        """Multiply the rest length of the selected strands by ``factor`` > 0, from the tip:
-        shorter strands are cut at the scaled rest arc length, longer ones grow, continuing the
-        tip's curvature and torsion at the last rest edge length."""
+        """Multiply the rest length of the selected strands by ``factor`` > 0, from the tip.
+
+        Shorter: the strand is cut at the scaled rest arc length.  Longer: the rest polyline is
+        continued beyond the tip with the tip's curvature and torsion (the screw motion taking the
+        last-but-one edge pair to the last one, at the last rest edge length; the current pose
+        continues rigidly with the tip's frame).  Either way the strand keeps its vertex count and
+        both poses are resampled along the new length (:func:`_resample`): edges scale by
+        ``factor``, and the rest length is ``factor`` times the old one up to the chord shortening
+        of the resampling.  A large growth of a curly strand therefore smooths curls finer than
+        the new edge spacing; add vertices to the groom beforehand for that.
+        """
         f = _positive("factor", factor)
         sel = np.nonzero(self.strand_selection)[0]
         if sel.size == 0:
@@ -801,18 +841,18 @@ class GroomingSession:
         off = g.strand_offsets
         new = {}
         for s in sel:
+            if f == 1.0:
+                break
             a, b = off[s], off[s + 1]
             cur = g.points[a:b].astype(np.float64)
             rest = g.rest_points[a:b].astype(np.float64)
-            _, le = _tangents(rest)
-            total = float(le.sum())
-            if f < 1.0:
-                j, u = _arc_cut(rest, f * total)
-                new[int(s)] = _cut(cur, rest, j, u)
-            elif f > 1.0:
+            c = _arc(rest)
+            total = float(c[-1])
+            if f > 1.0:
+                le = c[-1] - c[-2]
                 extra = (f - 1.0) * total
-                k = max(1, int(round(extra / le[-1])))
-                step = extra / k
+                k = max(1, int(math.ceil(extra / le * (1.0 + 1e-12))))
+                step = le  # the screw motion q belongs to this edge length: the helix continues exactly
                 q = _tip_rotation(rest)
                 t = rest[-1] - rest[-2]
                 t /= np.linalg.norm(t)
@@ -826,9 +866,10 @@ class GroomingSession:
                 grown = np.array(grown)
                 m = _tip_frame_map(rest, cur)
                 cur_grown = cur[-1] + (grown - rest[-1]) @ m.T
-                src = np.r_[np.arange(b - a), np.full(k, b - a - 1)]
-                fresh = np.r_[np.zeros(b - a, dtype=bool), np.ones(k, dtype=bool)]
-                new[int(s)] = (np.vstack([cur, cur_grown]), np.vstack([rest, grown]), src, fresh)
+                cur, ext = np.vstack([cur, cur_grown]), np.vstack([rest, grown])
+            else:
+                ext = rest
+            new[int(s)] = _resample(cur, ext, c / total, f * total)
 
         def apply():
             if new:
@@ -857,7 +898,7 @@ class GroomingSession:
 
         def apply():
             self.groom = replace(g, points=pts, rest_points=rest, params=dict(g.params))
-            self._invalidate()
+            self._invalidate(layout=False)
 
         self._edit("scale_curl", {"factor": f}, apply)
 
@@ -983,7 +1024,7 @@ class GroomingSession:
         def apply():
             self.config = new
             if name in REBUILD_PARAMETERS:
-                self._invalidate()
+                self._invalidate(layout=name in LAYOUT_PARAMETERS)
             elif self._sim is not None:
                 self._apply_live_parameters()
 
@@ -1023,17 +1064,36 @@ class GroomingSession:
         self._record("advance", frames=frames)
 
     # ------------------------------------------------------------------ the simulation objects
-    def _invalidate(self) -> None:
-        self._sim = None
+    def _invalidate(self, layout: bool = True) -> None:
+        """Mark the simulation out of date: ``layout`` -> build a new Model and solver at the next
+        frame (Taichi recompiles the kernels); else update the Model in place (same fields)."""
+        if layout:
+            self._sim = None
+        elif self._sim is not None:
+            self._sim.stale = True
         self._proxy_cache = None
+
+    def _guide_setup(self):
+        """Guide strands, their rest polylines (float64) and the material of the current config."""
+        from .config import RodMaterial
+
+        g, cfg = self.groom, self.config
+        off = g.strand_offsets
+        rest = g.rest_points.astype(np.float64)
+        guides = self._guide_strands()
+        material = RodMaterial(radius=cfg.radius, density=cfg.density, youngs_modulus_bend=cfg.youngs_modulus,
+                               youngs_modulus_stretch=cfg.youngs_modulus)
+        return guides, [rest[off[s]:off[s + 1]] for s in guides], material
 
     def _ensure_built(self) -> None:
         if self._sim is not None:
+            if self._sim.stale:
+                self._update_in_place()
             return
         from types import SimpleNamespace
 
         from .builder import GroomBuilder
-        from .config import ContactConfig, RodMaterial, SolverADMMConfig
+        from .config import ContactConfig, SolverADMMConfig
         from .model import _np_float
         from .skinning import SkinningConfig, SkinningLBS
         from .solver_admm import SolverADMM
@@ -1041,13 +1101,10 @@ class GroomingSession:
         t0 = time.perf_counter()
         g, cfg = self.groom, self.config
         off = g.strand_offsets
-        rest = g.rest_points.astype(np.float64)
-        guides = self._guide_strands()
-        material = RodMaterial(radius=cfg.radius, density=cfg.density, youngs_modulus_bend=cfg.youngs_modulus,
-                               youngs_modulus_stretch=cfg.youngs_modulus)
+        guides, guide_polylines, material = self._guide_setup()
         builder = GroomBuilder()
-        for s in guides:
-            builder.add_strand(rest[off[s]:off[s + 1]], material, root="clamped", body=0)
+        for p in guide_polylines:
+            builder.add_strand(p, material, root="clamped", body=0)
         model = builder.finalize()
         contacts = None
         if cfg.contacts or self.colliders:
@@ -1061,6 +1118,7 @@ class GroomingSession:
         control.gravity = tuple(cfg.gravity)
         skin = None
         if guides.size < g.strand_count:
+            rest = g.rest_points.astype(np.float64)
             polylines = [rest[off[s]:off[s + 1]] for s in range(g.strand_count)]
             skin = SkinningLBS(model, guides, polylines,
                                SkinningConfig(neighbour_count=min(cfg.neighbour_count, int(guides.size))),
@@ -1069,13 +1127,39 @@ class GroomingSession:
         row_of = np.full(g.vertex_count, -1, dtype=np.int64)
         row_of[guide_vertex] = np.arange(guide_vertex.size)
         self._sim = SimpleNamespace(model=model, solver=solver, state=state, control=control, skin=skin,
-                                    rest=state.to_numpy(), guide_vertex=guide_vertex, row_of=row_of,
+                                    guide_vertex=guide_vertex, row_of=row_of, stale=False,
                                     base_fixed=model.host["vertex_is_fixed"].copy(),
                                     base_body=model.host["vertex_body_position"].copy(), body=None,
                                     drag_rows=np.zeros(0, dtype=np.int64), np_float=_np_float())
         self._load_state()
         self.rebuild_count += 1
         self.timings["rebuild"].append(time.perf_counter() - t0)
+
+    def _update_in_place(self) -> None:
+        """New rest shapes and materials, same layout: :meth:`Model.update`, ``refresh_model`` and a
+        new skinning binding, all into the existing Taichi fields (no new field, no recompilation)."""
+        from .builder import GroomBuilder
+
+        t0 = time.perf_counter()
+        sim, g, cfg = self._sim, self.groom, self.config
+        guides, guide_polylines, material = self._guide_setup()
+        builder = GroomBuilder()
+        for p in guide_polylines:
+            builder.add_strand(p, material, root="clamped", body=0)
+        host, materials = _host_of(builder)
+        sim.model.update(host, materials)
+        sim.solver.config.w0 = cfg.w0
+        sim.solver.refresh_model()
+        if sim.skin is not None:
+            rest = g.rest_points.astype(np.float64)
+            off = g.strand_offsets
+            sim.skin.rebind([rest[off[s]:off[s + 1]] for s in range(g.strand_count)])
+        sim.base_fixed = host["vertex_is_fixed"].copy()
+        sim.base_body = host["vertex_body_position"].copy()
+        sim.stale = False
+        self._load_state()
+        self.update_count += 1
+        self.timings["update"].append(time.perf_counter() - t0)
 
     def _apply_live_parameters(self) -> None:
         sim, cfg = self._sim, self.config
@@ -1087,7 +1171,7 @@ class GroomingSession:
     def _load_state(self) -> None:
         """State from the groom: rest frames and twists, current positions; fresh multipliers."""
         sim = self._sim
-        sim.state.load(sim.rest)
+        sim.model.reset_state(sim.state)
         sim.state.vertex_position.from_numpy(self.groom.points[sim.guide_vertex].astype(sim.np_float))
         sim.solver.reset_duals()
         self._apply_kinematics()

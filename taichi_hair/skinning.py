@@ -534,34 +534,55 @@ class SkinningLBS:
                  strand_body=0):
         self.config = config or SkinningConfig()
         self.guide_model = guide_model
+        self._strand_body = strand_body
+        self.guide_indices = np.asarray(guide_indices, dtype=np.int64)
+        h = self._binding(strands)
+        self.render_strand_count = int(h["render_strand_vertex_count"].shape[0])
+        self.render_vertex_count = int(h["render_vertex_rest_position"].shape[0])
+        self.neighbour_count = int(h["render_vertex_bind_edge"].shape[1])
+        self.fields = SkinningFields(self.render_vertex_count, self.neighbour_count, guide_model.vertex_count)
+        self._upload(h)
+
+    def _binding(self, strands) -> dict:
         rest_frames = None
         if self.config.frame == "material":
-            rest = guide_model.state()
+            rest = self.guide_model.state()
             rest_frames = (rest.edge_tangent.to_numpy(), rest.edge_material_d1.to_numpy(),
                            rest.edge_material_d2.to_numpy())
-        h = compute_binding(guide_model, guide_indices, strands, self.config.neighbour_count, self.config.frame,
-                            rest_frames)
+        h = compute_binding(self.guide_model, self.guide_indices, strands, self.config.neighbour_count,
+                            self.config.frame, rest_frames)
         ns = h["render_strand_vertex_count"].shape[0]
-        bodies = np.asarray(_per_strand(strand_body, ns, "SkinningLBS: field 'strand_body'", 0), dtype=np.int64)
-        if bodies.size and (bodies.min() < -1 or bodies.max() >= guide_model.body_count):
-            raise ValueError(f"SkinningLBS: field 'strand_body' must be -1 or in [0, {guide_model.body_count})")
+        bodies = np.asarray(_per_strand(self._strand_body, ns, "SkinningLBS: field 'strand_body'", 0),
+                            dtype=np.int64)
+        if bodies.size and (bodies.min() < -1 or bodies.max() >= self.guide_model.body_count):
+            raise ValueError(f"SkinningLBS: field 'strand_body' must be -1 or in [0, {self.guide_model.body_count})")
         vertex_body = np.full(h["render_vertex_rest_position"].shape[0], -1, dtype=np.int32)
         vertex_body[h["render_strand_vertex_start"]] = bodies
         h["render_vertex_body"] = vertex_body
+        return h
+
+    def _upload(self, h: dict) -> None:
         self.host = h
-        self.guide_indices = np.asarray(guide_indices, dtype=np.int64)
-        self.render_strand_count = ns
-        self.render_vertex_count = int(h["render_vertex_rest_position"].shape[0])
-        self.neighbour_count = int(h["render_vertex_bind_edge"].shape[1])
         f = _np_float()
-        sk = SkinningFields(self.render_vertex_count, self.neighbour_count, guide_model.vertex_count)
+        sk = self.fields
         sk.render_vertex_rest_position.from_numpy(h["render_vertex_rest_position"].astype(f))
-        sk.render_vertex_body.from_numpy(vertex_body)
+        sk.render_vertex_body.from_numpy(h["render_vertex_body"])
         sk.render_vertex_bind_edge.from_numpy(h["render_vertex_bind_edge"].astype(np.int32))
         sk.render_vertex_bind_param.from_numpy(h["render_vertex_bind_param"].astype(f))
         sk.render_vertex_bind_local.from_numpy(h["render_vertex_bind_local"].astype(f))
         sk.render_vertex_bind_weight.from_numpy(h["render_vertex_bind_weight"].astype(f))
-        self.fields = sk
+
+    def rebind(self, strands) -> None:
+        """Bind again, into the same fields, after the rest shapes changed in place (the guide
+        Model updated by :meth:`Model.update`, the render strands edited) with the same layout:
+        same render vertex counts per strand, same guides.  No field is allocated, so no kernel
+        is compiled again; the result equals a new :class:`SkinningLBS` of the same inputs."""
+        h = self._binding(strands)
+        if not (np.array_equal(h["render_strand_vertex_count"], self.host["render_strand_vertex_count"])
+                and h["render_vertex_bind_edge"].shape == self.host["render_vertex_bind_edge"].shape):
+            raise ValueError("SkinningLBS.rebind: the render strands' vertex counts (or the neighbour count) "
+                             "differ from the bound ones; build a new SkinningLBS")
+        self._upload(h)
 
     def deform(self, guide_state: State, control: Control) -> None:
         """Skin the render strands to ``guide_state`` (positions, and frames for
