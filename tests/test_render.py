@@ -1,0 +1,148 @@
+"""Off-screen rendering (GGUI on Mesa's software Vulkan with Taichi's CPU arch): the NumPy camera equals
+GGUI's, and the pixels an off-screen render draws lie where the strands project (checked against the
+projection, not a stored picture)."""
+
+import numpy as np
+import pytest
+
+from taichi_hair.io import Groom
+from taichi_hair.render import (CameraConfig, ViewerGGUI, edge_indices, pick_ray, project, projection_matrix,
+                                render_groom, sphere_mesh, strand_colors, view_matrix)
+
+W, H = 160, 120
+BACKGROUND = np.array([0.0, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def viewer():
+    try:
+        v = ViewerGGUI(W, H, show_window=False, background=tuple(BACKGROUND))
+    except Exception as exc:  # no Vulkan device at all: say so instead of a crash
+        pytest.skip(f"GGUI needs a Vulkan device (mesa-vulkan-drivers on a CPU machine): {exc}")
+    return v
+
+
+def scene():
+    """Five horizontal strands, a diagonal one and a curly one in front of the origin."""
+    lines = [np.c_[np.linspace(-0.1, 0.1, 15), np.full(15, 0.025 * k), np.zeros(15)] for k in range(-2, 3)]
+    t = np.linspace(0.0, 1.0, 30)
+    lines.append(np.c_[-0.08 + 0.16 * t, -0.07 + 0.14 * t, 0.02 * t])
+    lines.append(np.c_[0.05 + 0.015 * np.cos(12 * t), 0.06 * t - 0.03, 0.015 * np.sin(12 * t) + 0.03])
+    return Groom.from_polylines(lines, units="m")
+
+
+CAMERA = CameraConfig(eye=(0.08, 0.06, 0.45), target=(0.0, 0.0, 0.0), fov=40.0, z_near=0.05, z_far=10.0)
+
+
+def segment_distance(q, a, b):
+    """Distance of each point q (n, 2) to the nearest of the segments a[k] b[k], shape (n,)."""
+    u = b - a
+    t = np.clip(np.einsum("nkj,kj->nk", q[:, None, :] - a[None], u) / np.maximum(np.sum(u * u, axis=1), 1e-30),
+                0.0, 1.0)
+    return np.linalg.norm(a[None] + t[..., None] * u[None] - q[:, None, :], axis=2).min(axis=1)
+
+
+def test_numpy_camera_equals_the_ggui_camera(viewer):
+    for cam in (CAMERA, CameraConfig(eye=(-0.3, 0.4, -0.2), target=(0.01, 0.02, 0.0), up=(0.0, 1.0, 0.2),
+                                     fov=65.0, z_near=0.01, z_far=100.0)):
+        c = viewer.camera
+        c.position(*cam.eye)
+        c.lookat(*cam.target)
+        c.up(*cam.up)
+        c.fov(cam.fov)
+        c.z_near(cam.z_near)
+        c.z_far(cam.z_far)
+        np.testing.assert_allclose(np.array(c.get_view_matrix()).T, view_matrix(cam), atol=1e-6)
+        np.testing.assert_allclose(np.array(c.get_projection_matrix(W / H)).T, projection_matrix(cam, W / H),
+                                   rtol=1e-5, atol=1e-7)
+
+
+def test_pick_ray_inverts_the_projection():
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-0.1, 0.1, (50, 3))
+    px, depth, vis = project(p, CAMERA, W, H)
+    assert vis.all()
+    for (col, row), x in zip(px, p):
+        o, d = pick_ray(CAMERA, W, H, col, row)
+        assert np.linalg.norm(np.cross(x - o, d)) < 1e-9  # x lies on the ray through its own pixel
+
+
+def test_offscreen_render_draws_where_the_strands_project(viewer, tmp_path):
+    g = scene()
+    img = render_groom(g, tmp_path / "still.png", camera=CAMERA, color="strand", viewer=viewer)
+    assert img.shape == (H, W, 3) and img.dtype == np.uint8 and (tmp_path / "still.png").stat().st_size > 0
+    drawn = np.abs(img.astype(np.float64) - 255 * BACKGROUND).sum(axis=2) > 24
+    rows, cols = np.nonzero(drawn)
+    assert drawn.sum() > 300  # non-empty: about 7 strands x ~100 pixels
+    px, _, vis = project(g.points, CAMERA, W, H)
+    assert vis.all()
+    e = edge_indices(g.strand_offsets).reshape(-1, 2)
+    a, b = px[e[:, 0]], px[e[:, 1]]
+    # Every drawn pixel's centre lies within a pixel of a projected edge...
+    d = segment_distance(np.c_[cols + 0.5, rows + 0.5], a, b)
+    assert d.max() <= 1.0, d.max()
+    # ...and the projected edges are drawn: points along them have a drawn pixel within a pixel.
+    t = np.linspace(0.0, 1.0, 7)[1:-1]
+    q = (a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]).reshape(-1, 2)
+    near = np.zeros(len(q), dtype=bool)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            r = np.clip(np.floor(q[:, 1]).astype(int) + dr, 0, H - 1)
+            c = np.clip(np.floor(q[:, 0]).astype(int) + dc, 0, W - 1)
+            near |= drawn[r, c]
+    assert near.mean() > 0.97, near.mean()
+    # A different camera moves the drawing with the projection (not a fixed picture).
+    moved = CameraConfig(eye=(-0.2, -0.1, 0.4), target=(0.02, 0.0, 0.0), fov=50.0, z_near=0.05, z_far=10.0)
+    img2 = render_groom(g, None, camera=moved, color="strand", viewer=viewer)
+    drawn2 = np.abs(img2.astype(np.float64) - 255 * BACKGROUND).sum(axis=2) > 24
+    r2, c2 = np.nonzero(drawn2)
+    px2, _, _ = project(g.points, moved, W, H)
+    assert segment_distance(np.c_[c2 + 0.5, r2 + 0.5], px2[e[:, 0]], px2[e[:, 1]]).max() <= 1.0
+    assert (drawn2 != drawn).sum() > 100
+
+
+def test_head_mesh_hides_strands_behind_it(viewer):
+    """A sphere between the camera and a strand: the strand's pixels inside the sphere's silhouette
+    show the sphere, those outside show the strand (depth test)."""
+    behind = [np.c_[np.linspace(-0.12, 0.12, 25), np.zeros(25), np.full(25, -0.1)]]
+    g = Groom.from_polylines(behind, units="m")
+    head = sphere_mesh((0.0, 0.0, 0.0), 0.04, rings=16, segments=32)
+    cam = CameraConfig(eye=(0.0, 0.0, 0.4), target=(0.0, 0.0, 0.0), fov=40.0, z_near=0.05, z_far=10.0)
+    viewer.head_vertex = None
+    img = render_groom(g, None, camera=cam, color="uniform", head=head, viewer=viewer, head_color=(0.2, 0.4, 0.95))
+    viewer.head_vertex = None  # later tests draw no head
+    px, _, _ = project(g.points, cam, W, H)
+    row = int(np.floor(px[0, 1]))
+    centre_col = W // 2
+    sphere_px, _, _ = project(np.array([[0.0, 0.0, 0.0], [0.04, 0.0, 0.0]]), cam, W, H)
+    radius_px = sphere_px[1, 0] - sphere_px[0, 0]
+    band = img[row - 1:row + 2].astype(int)  # the line's row, give or take the rasteriser's rounding
+    inside = band[:, centre_col][np.argmax(band[:, centre_col].sum(axis=1))]
+    outside = band[:, int(centre_col + radius_px + 8)][np.argmax(band[:, int(centre_col + radius_px + 8)].sum(axis=1))]
+    brown = np.array([0.45, 0.3, 0.18]) * 255
+    assert np.abs(outside - brown).sum() < 60  # the strand, unlit hair brown
+    assert inside[2] > inside[0] + 40  # the (lit, blue) sphere
+
+
+def test_strand_colors_modes_and_errors():
+    g = scene()
+    counts = g.strand_vertex_counts()
+    for mode in ("region", "strand", "uniform", "groom"):
+        c = strand_colors(g, mode)
+        assert c.shape == (g.vertex_count, 3) and c.dtype == np.float32 and c.min() >= 0 and c.max() <= 1
+    per_strand = strand_colors(g, "strand")
+    assert np.array_equal(per_strand[0], per_strand[counts[0] - 1])  # one colour along a strand
+    err = strand_colors(g, "error", values=np.arange(g.strand_count, dtype=float))
+    assert not np.array_equal(err[0], err[-1])
+    sel = np.zeros(g.vertex_count, dtype=bool)
+    sel[3] = True
+    c = strand_colors(g, "region", selection=sel)
+    assert np.allclose(c[3], (1.0, 0.55, 0.05)) and not np.allclose(c[4], (1.0, 0.55, 0.05))
+    with pytest.raises(ValueError, match="colour mode"):
+        strand_colors(g, "rainbow")
+    with pytest.raises(ValueError, match="error values"):
+        strand_colors(g, "error")
+    with pytest.raises(ValueError, match="fov"):
+        CameraConfig(fov=200.0)
+    with pytest.raises(ValueError, match="eye and target"):
+        CameraConfig(eye=(0, 0, 0), target=(0, 0, 0))
