@@ -154,8 +154,15 @@ def _contact_normal(d, ea, eb):
 @ti.kernel
 def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_base: ti.template(),
                     vertex_typical_length: ti.template(), vertex_dt_bend: ti.template(), dt: float,
-                    gravity_norm: float, dynamic: ti.template()):
-    """CSR vertex -> contacts (sorted), W_z (Sec. 4.5 "Collision constraint weights"), D_hat, warm start zero."""
+                    gravity_norm: float, dynamic: ti.template(), first_new: ti.i32):
+    """CSR vertex -> contacts (sorted), W_z (Sec. 4.5 "Collision constraint weights"), D_hat.
+
+    Contacts from ``first_new`` on start from zero; with ``first_new`` = 0 (the proximity detection at the
+    beginning of a step) the collision duals lambda_z are zeroed too.  Contacts appended later in the step
+    (continuous-time detection) keep the earlier contacts' progress: their accumulated corrections
+    r~ = D_hat r are rescaled to the new D_hat (more contacts on a vertex split its mass further), so the
+    impulses r they stand for are unchanged, and lambda_z is kept.
+    """
     nc = ti.min(con.contact_count[None], con.capacity)
     for i in con.vertex_contact_count:
         con.vertex_contact_count[i] = 0
@@ -205,7 +212,8 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
                 dtt = ti.min(dtt, dt)
             inv_w = dtt * dtt / vertex_weight_base[i]
         con.vertex_contact_inv_weight[i] = inv_w
-        con.vertex_contact_dual[i] = vec3(0.0)
+        if first_new == 0:
+            con.vertex_contact_dual[i] = vec3(0.0)
     for c in range(nc):
         dh = 0.0
         for k in ti.static(range(4)):
@@ -213,10 +221,15 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             if v >= 0:
                 h = con.contact_weight[c][k]
                 dh += con.vertex_contact_count[v] * h * h * con.vertex_contact_inv_weight[v]
+        if c < first_new:
+            old = con.contact_delassus[c]
+            if old > 0.0:
+                con.contact_accumulated[c] *= dh / old
+        else:
+            con.contact_accumulated[c] = vec3(0.0)
+            con.contact_delta[c] = vec3(0.0)
+            con.contact_status[c] = 0
         con.contact_delassus[c] = dh
-        con.contact_accumulated[c] = vec3(0.0)
-        con.contact_delta[c] = vec3(0.0)
-        con.contact_status[c] = 0
 
 
 # --------------------------------------------------------------------------- host orchestration
@@ -256,6 +269,12 @@ class ContactPipeline:
         capacity = max(16, int(config.capacity_per_vertex * n))
         self.con = ContactFields(capacity, n)
         self.stats_out = ti.field(float, 4)
+        #: Continuous-time detection buffers, allocated on first use (``continuous_detections`` > 0).
+        self.ccd = None
+        self.ccd_skipped = 0
+        self.proximity_contacts = 0
+        self.continuous_contacts = 0
+        self.capped_queries = 0
         self.grow_events = 0
         self.detections = 0
 
@@ -309,10 +328,14 @@ class ContactPipeline:
         fall = cfg.velocity_margin * gn * dt * dt if dynamic else 0.0
         margin = cfg.margin
         # The velocity part of the reach is capped at one longest edge, so the cells (and the cost of the
-        # 27-cell query) stay about two edges wide; faster relative motion can tunnel within a step, as in
-        # the paper's proximity-only mode (continuous-time detection is not implemented).
+        # query) stay about two edges wide; faster relative motion can tunnel within a step in the
+        # proximity-only mode, as in the paper's (continuous_detections > 0 catches it).
         # Body contacts keep the full margin (it does not change the grid); hair-hair pairs get it capped.
         body_sweep, body_fall = sweep, fall
+        if cfg.continuous_detections > 0:
+            # Continuous-time detection catches the pairs that close during the step: hair-hair
+            # proximity needs no velocity reach (bodies keep it: they have no continuous test).
+            sweep, fall = 0.0, 0.0
         motion = sweep * 2.0 * speed + fall
         if motion > max_edge > 0.0:
             sweep *= max_edge / motion
@@ -340,10 +363,90 @@ class ContactPipeline:
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
         build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                        dt, gn, dynamic)
+                        dt, gn, dynamic, 0)
         self.detections += 1
         self.margin_used = margin
+        self.proximity_contacts = total
+        self.continuous_contacts = 0
+        self.capped_queries = 0
+        self._dt, self._gn, self._dynamic = dt, gn, dynamic
         return total
+
+    def detect_continuous(self, x0, x) -> int:
+        """Continuous-time detection from x0 (begin of step) to x (current iterate); appends the new
+        impacts as contacts (module :mod:`taichi_hair.ccd`) and returns how many it added."""
+        import warnings
+
+        from .ccd import (count_cells, count_impact_contacts, fill_entries, find_impacts, swept_boxes,
+                          write_impact_contacts)
+        from .fields import CCDFields
+
+        m, cfg = self.model, self.config
+        if not cfg.hair_hair:
+            return 0
+        if self.ccd is None:
+            self.ccd = CCDFields(m.vertex_count, self.grid.table_size, max(8 * m.vertex_count, 1 << 14))
+            self._ccd_scalars = ti.field(float, 2)
+        ccd = self.ccd
+        swept_boxes(m, x0, x, self.vertex_radius, ccd, self._ccd_scalars)
+        # Two edges outside each other's proximity reach approach by at most twice the largest
+        # displacement: when that is within the proximity margin no impact is possible (skip the pass).
+        if 2.0 * float(ccd.max_displacement[None]) <= cfg.margin:
+            self.ccd_skipped += 1
+            return 0
+        extent, longest = (float(v) for v in self._ccd_scalars.to_numpy())
+        # Cells of the longest edge (the paper's size), widened for very fast motion so no swept box spans
+        # more than ~5 cells per axis.
+        h = max(longest, 0.25 * extent, 1e-9)
+        count_cells(m, ccd, h)
+        entries = int(ccd.edge_entry_start[m.vertex_count])
+        if entries > ccd.entry_capacity:
+            new_cap = max(2 * ccd.entry_capacity, int(1.25 * entries))
+            warnings.warn(f"continuous detection: {entries} grid entries for a capacity of "
+                          f"{ccd.entry_capacity}; growing it to {new_cap}", stacklevel=3)
+            self.ccd = ccd = CCDFields(m.vertex_count, self.grid.table_size, new_cap)
+            swept_boxes(m, x0, x, self.vertex_radius, ccd, self._ccd_scalars)
+            count_cells(m, ccd, h)
+            self.grow_events += 1
+        fill_entries(ccd)
+        find_impacts(m, m, x0, x, self.vertex_radius, ccd, self.con, h)
+        self.capped_queries += int(ccd.capped_queries[None])
+        count_impact_contacts(ccd, self.con)
+        first = min(int(self.con.contact_count[None]), self.con.capacity)
+        while True:
+            write_impact_contacts(x0, x, self.vertex_radius, ccd, self.con, first, cfg.friction)
+            total = int(self.con.contact_count[None])
+            if total <= self.con.capacity:
+                break
+            self._grow_contacts(total, keep=first)
+        added = total - first
+        if added > 0:
+            build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
+                            self._dt, self._gn, self._dynamic, first)
+        self.continuous_contacts += added
+        return added
+
+    def _grow_contacts(self, needed: int, keep: int) -> None:
+        """Grow the contact buffers mid-step, keeping the first ``keep`` contacts and the duals."""
+        import warnings
+
+        from .fields import ContactFields
+
+        old = self.con
+        new_cap = max(2 * old.capacity, int(1.25 * needed))
+        warnings.warn(f"contact buffer overflow: {needed} contacts for a capacity of {old.capacity}; "
+                      f"growing it to {new_cap} (no contact dropped)", stacklevel=4)
+        new = ContactFields(new_cap, self.model.vertex_count)
+        for name in ("contact_vertex", "contact_weight", "contact_normal", "contact_kinematic", "contact_friction",
+                     "contact_delassus", "contact_accumulated", "contact_delta", "contact_collider",
+                     "contact_status"):
+            a = getattr(new, name).to_numpy()
+            a[:keep] = getattr(old, name).to_numpy()[:keep]
+            getattr(new, name).from_numpy(a)
+        new.vertex_contact_dual.copy_from(old.vertex_contact_dual)
+        new.contact_count[None] = keep
+        self.con = new
+        self.grow_events += 1
 
     def project(self, x, buf, sweeps: int) -> None:
         """The z-step and lambda_z update of one ADMM iteration (Sec. 4.5), then W_z for the global step."""
@@ -381,4 +484,5 @@ class ContactPipeline:
         contact_statistics(x, self.vertex_radius, self.colliders, self.con, self.stats_out, False)
         o = self.stats_out.to_numpy()
         return {"contacts": self.contact_count, "sticking": int(o[0]), "sliding": int(o[1]),
-                "separating": int(o[2]), "max_penetration_m": max(float(o[3]), 0.0)}
+                "separating": int(o[2]), "max_penetration_m": max(float(o[3]), 0.0),
+                "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries}

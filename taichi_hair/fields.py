@@ -267,3 +267,44 @@ class GridFields:
         self.cell_size = ti.field(float, ())
         self.max_edge_length = ti.field(float, ())
         self.max_speed = ti.field(float, ())
+
+
+class CCDFields:
+    """Continuous-time detection (Sec. 4.5, ACCD): swept edge boxes in a multi-insert spatial hash.
+
+    Every real edge is inserted in each cell its swept box (begin-of-step and current
+    positions, grown by its radius) overlaps; entries are counting-sorted by hash bucket.
+    ``entry_capacity`` entries are allocated up front and grown when a detection needs more.
+    Per-edge fields have shape (vertex_count,) (indexed by edge).
+    """
+
+    def __init__(self, vertex_count: int, table_size: int, entry_capacity: int, impacts_per_edge: int = 2):
+        n, t, cap, k = vertex_count, table_size, entry_capacity, impacts_per_edge
+        self.table_size = t
+        self.entry_capacity = cap
+        self.impacts_per_edge = k
+        #: Swept box of each edge, grown by its radius: lower and upper corners [m].
+        self.edge_box_lo = ti.field(vec3, n)
+        self.edge_box_hi = ti.field(vec3, n)
+        #: Cell range of each edge's swept box, inclusive [-]; ghost edges get an empty range.
+        self.edge_cell_lo = ti.Vector.field(3, ti.i32, n)
+        self.edge_cell_hi = ti.Vector.field(3, ti.i32, n)
+        #: Cells per edge, then their exclusive prefix sum; entry n holds the total [-], shape (vertex_count + 1,).
+        self.edge_entry_start = ti.field(ti.i32, n + 1)
+        #: Entries per bucket, start of each bucket, fill cursor [-], shapes (t,), (t + 1,), (t,).
+        self.bucket_count = ti.field(ti.i32, t)
+        self.bucket_start = ti.field(ti.i32, t + 1)
+        self.bucket_cursor = ti.field(ti.i32, t)
+        #: (edge, cell) entries sorted by bucket [-], shape (entry_capacity,).
+        self.entry_edge = ti.field(ti.i32, cap)
+        self.entry_cell = ti.Vector.field(3, ti.i32, cap)
+        #: The earliest impacts of each edge, sorted by (time, other edge): other edge [-] and time of
+        #: impact in [0, 1] of the step's motion [-], shape (vertex_count, impacts_per_edge); their number.
+        self.edge_impact = ti.field(ti.i32, (n, k))
+        self.edge_impact_time = ti.field(float, (n, k))
+        self.edge_impact_count = ti.field(ti.i32, n)
+        #: Contacts emitted by each edge, then their exclusive prefix sum [-], shape (vertex_count + 1,).
+        self.edge_emit_count = ti.field(ti.i32, n + 1)
+        #: Largest vertex displacement |x - x^t| [m] and ACCD loops that hit the iteration cap [-].
+        self.max_displacement = ti.field(float, ())
+        self.capped_queries = ti.field(ti.i32, ())

@@ -52,7 +52,7 @@ from .tridiag import TridiagonalSolver
 #: Profiled stages.  The stage schedule fills local/global/frames/twist; the strand
 #: schedule records its fused ADMM loop under "iterations" (and the frame update
 #: before the loop under "frames").
-STAGES = ("detection", "begin", "local", "projection", "global", "frames", "twist", "iterations", "correction", "end")
+STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "iterations", "correction", "end")
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
@@ -164,6 +164,14 @@ class SolverADMM(StageTimer):
         admm.compute_strains(self.measure, m, m, rest.vertex_position, rest.edge_twist, rest,
                              self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
 
+    def _continuous_iterations(self) -> set:
+        """ADMM iterations (0-based) that begin with continuous-time detection: ``continuous_detections``
+        of them at regular intervals, the first on the advected guess (iteration 0)."""
+        con = self.contacts
+        k = con.config.continuous_detections if con is not None else 0
+        n = self.config.iterations
+        return {(j * n) // k for j in range(k)} if k > 0 else set()
+
     def refresh_model(self) -> None:
         """Recompute everything derived from the Model after :meth:`Model.update` (no new fields)."""
         self._set_coefficients()
@@ -218,7 +226,12 @@ class SolverADMM(StageTimer):
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
         elif self.schedule == "strand":
-            for _ in range(cfg.iterations):
+            ccd_at = self._continuous_iterations()
+            for it in range(cfg.iterations):
+                if it in ccd_at:
+                    # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
+                    con.detect_continuous(b.vertex_position_begin, state.vertex_position)
+                    t0 = self._tock("continuous", t0)
                 # (b, c) z-step and lambda_z update, then (a, c-g) one iteration strand by strand.
                 con.project(state.vertex_position, b, con.config.projection_iterations)
                 t0 = self._tock("projection", t0)
@@ -233,6 +246,10 @@ class SolverADMM(StageTimer):
         if con is not None:
             con.count_status(state.vertex_position)
         if con is not None and con.config.correction_iterations > 0:
+            if con.config.continuous_detections > 0:
+                # "Repeat continuous-collision detection and feasible projection on x" (Alg. 1, end).
+                con.detect_continuous(b.vertex_position_begin, state.vertex_position)
+                t0 = self._tock("continuous", t0)
             con.correct(state.vertex_position, con.config.correction_iterations)
             update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
                                     state.edge_twist, state)
@@ -250,7 +267,13 @@ class SolverADMM(StageTimer):
         """Step 4 of Algorithm 1, "stage" schedule: a few kernels per iteration, each over all vertices."""
         m, b, cfg = self.model, self.buf, self.config
         dyn = self.dynamic
-        for _ in range(cfg.iterations):
+        con = self.contacts
+        ccd_at = self._continuous_iterations()
+        for it in range(cfg.iterations):
+            if it in ccd_at:
+                # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
+                con.detect_continuous(b.vertex_position_begin, state.vertex_position)
+                t0 = self._tock("continuous", t0)
             # (a) Local elasticity solve over y (Sec. 4.4).
             solve_local_elasticity(self.measure, self.use_q, m, m, m, m, control.body_rotation,
                                    state.vertex_position, state.edge_twist, state, b, damping_scale)
