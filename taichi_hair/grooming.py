@@ -637,8 +637,11 @@ class GroomingSession:
                 os.unlink(tmp)
             raise
 
-    def replay(self, source) -> None:
+    def replay(self, source, after_each=None) -> None:
         """Apply the actions of a session log (a list of dicts or a ``session.json`` path) in order.
+
+        ``after_each(index, entry)``, if given, is called after each applied entry (the off-screen
+        tool renders a frame there).
 
         Raises:
             ValueError naming the entry index (and the file's line), the action and the problem,
@@ -665,6 +668,8 @@ class GroomingSession:
                 method(**params)
             except ValueError as exc:
                 raise ValueError(f"{where}, action {name!r}: {exc}") from None
+            if after_each is not None:
+                after_each(i, entry)
 
     # ------------------------------------------------------------------ selection
     def _apply_selection(self, hit: np.ndarray, mode: str) -> int:
