@@ -1,4 +1,25 @@
-"""``taichi-hair simulate``: run a scene headless and write its frames."""
+"""``taichi-hair simulate``: run a scene headless and write its frames.
+
+    taichi-hair simulate hang --strands 300 --frames 48 --out out/hang
+    taichi-hair simulate assets/scenes/head_turn.toml --out out/head_turn.usd
+    taichi-hair simulate assets/scenes/hairball.toml --out out/hb --frames 96 --resume
+
+SCENE is a built-in name (``hang``, ``hairball``) or a TOML scene file (:mod:`taichi_hair.scene_file`).
+The output is chosen by the name given to ``--out``:
+
+- ``*.usd``, ``*.usda``, ``*.usdc``: one USD BasisCurves prim with time-sampled points (one time code
+  per frame, ``timeCodesPerSecond`` = fps), written at the end;
+- ``*.thair.npz`` or ``*.npz``: the native groom format with every frame in ``point_frames``;
+- anything else: a folder with ``frames.npz`` (positions of every frame), ``frames/frame_NNNNN.<ext>``
+  (one groom file per frame, written as it completes; ``--frame-format``), ``stats.csv`` and
+  ``summary.json``.
+
+For a file output the statistics, summary and checkpoint sit beside it: ``<name>.stats.csv``,
+``<name>.summary.json``, ``<name>.checkpoint.npz``.  Checkpoints (:mod:`taichi_hair.checkpoint`, ADMM
+solver only) are written every ``--checkpoint-every`` frames and at the end; ``--resume`` continues from
+the last one and gives the same frames, bit for bit, as a run that never stopped (and refuses a
+checkpoint made for another scene or other settings).
+"""
 
 from __future__ import annotations
 
@@ -12,86 +33,239 @@ import numpy as np
 
 from .cli_common import CLIError, _add_common, _atomic_savez, _init_taichi
 
-
 SCENES = ("hang", "hairball")
+#: Defaults of the built-in scenes (a TOML scene's own values win unless a flag is given).
+NAMED_DEFAULTS = dict(strands=300, frames=48, fps=24.0, substeps=4, iterations=10, seed=0)
+USD_EXTENSIONS = (".usd", ".usda", ".usdc")
 
 
-def _build_scene(args):
-    """(model, solver config, colliders, rotation(t), scene description) for a named scene."""
-    from . import SolverADMMConfig
-    from .config import ContactConfig
+# --------------------------------------------------------------------------- scenes
+def _named_scene(args):
+    """The built-in scenes as :class:`~taichi_hair.scene_file.Scene` objects (their own builders)."""
+    from .config import ContactConfig, SolverADMMConfig
+    from .scene_file import BodyAnimation, Scene
     from .scenes import HairballScene, HangScene, build_hairball, build_hang, hairball_rotation, nod_rotation
 
+    d = {k: (getattr(args, k) if getattr(args, k) is not None else v) for k, v in NAMED_DEFAULTS.items()}
+    iterations = d["iterations"]
     if args.scene == "hang":
-        scene = HangScene(strands=args.strands, length=args.length if args.length else 0.2, seed=args.seed)
-        cfg = SolverADMMConfig(iterations=args.iterations, mode="dynamic")
-        return build_hang(scene), cfg, None, (lambda t: nod_rotation(scene, t)), scene
-    from .colliders import SphereCollider
+        hs = HangScene(strands=d["strands"], length=args.length if args.length else 0.2, seed=d["seed"])
+        cfg = SolverADMMConfig(iterations=iterations, mode="dynamic")
+        colliders = []
+        body = BodyAnimation(function=lambda t: nod_rotation(hs, t), description={"preset": "hang-nod"})
+        builder = (lambda: build_hang(hs))
+        scene_desc = dict(vars(hs))
+    else:
+        hs = HairballScene(strands=d["strands"], length=args.length if args.length else 0.30, seed=d["seed"])
+        contacts = ContactConfig(friction=hs.friction, projection_iterations=2, correction_iterations=10,
+                                 continuous_detections=args.continuous or 0)
+        cfg = SolverADMMConfig(iterations=iterations, mode="dynamic", contacts=contacts)
+        from .colliders import SphereCollider
 
-    scene = HairballScene(strands=args.strands, length=args.length if args.length else 0.30, seed=args.seed)
-    contacts = ContactConfig(friction=scene.friction, projection_iterations=2, correction_iterations=10,
-                             continuous_detections=args.continuous)
-    cfg = SolverADMMConfig(iterations=args.iterations, mode="dynamic", contacts=contacts)
-    ball = [SphereCollider(radius=scene.ball_radius, friction=scene.friction, body=0)]
-    return build_hairball(scene), cfg, ball, hairball_rotation, scene
+        colliders = [SphereCollider(radius=hs.ball_radius, friction=hs.friction, body=0)]
+        body = BodyAnimation(function=hairball_rotation, description={"preset": "hairball"})
+        builder = (lambda: build_hairball(hs))
+        scene_desc = dict(vars(hs), continuous=args.continuous or 0)
+    desc = {"name": args.scene, "params": scene_desc, "iterations": iterations, "fps": d["fps"],
+            "substeps": d["substeps"]}
+    return Scene(name=args.scene, path="", frames=d["frames"], fps=d["fps"], substeps=d["substeps"],
+                 gravity=(0.0, -9.81, 0.0), groom=None, solver="admm", solver_config=cfg, colliders=colliders,
+                 bodies=[body], description=desc, model_builder=builder)
 
 
+def _load_scene(args):
+    if args.scene in SCENES:
+        return _named_scene(args)
+    if not args.scene.lower().endswith(".toml"):
+        raise CLIError(f"unknown scene {args.scene!r} (available: {', '.join(SCENES)}, or a .toml scene file)")
+    if not os.path.isfile(args.scene):
+        raise CLIError(f"{args.scene}: no such scene file")
+    from .scene_file import load_scene
+
+    over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
+                length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous)
+    return load_scene(args.scene, over)
+
+
+# --------------------------------------------------------------------------- output
+def _output_layout(out: str) -> dict:
+    """Where each output goes, by the extension of ``out``."""
+    low = out.lower()
+    if low.endswith(USD_EXTENSIONS):
+        kind, base = "usd", os.path.splitext(out)[0]
+    elif low.endswith(".npz"):
+        kind, base = "native", out[: -len(".thair.npz")] if low.endswith(".thair.npz") else out[:-4]
+    else:
+        kind = "folder"
+    if kind == "folder":
+        return dict(kind=kind, dir=out, frames_npz=os.path.join(out, "frames.npz"),
+                    frame_dir=os.path.join(out, "frames"), stats=os.path.join(out, "stats.csv"),
+                    summary=os.path.join(out, "summary.json"), checkpoint=os.path.join(out, "checkpoint.npz"))
+    return dict(kind=kind, dir=os.path.dirname(os.path.abspath(out)), file=out, stats=base + ".stats.csv",
+                summary=base + ".summary.json", checkpoint=base + ".checkpoint.npz")
+
+
+def _frame_groom(model, positions, radius, fps, frames=None):
+    from .io.groom import Groom
+
+    h = model.host
+    off = np.r_[h["strand_vertex_start"], h["strand_vertex_start"][-1] + h["strand_vertex_count"][-1]]
+    g = Groom(points=np.ascontiguousarray(positions if frames is None else frames[0]),
+              strand_offsets=off.astype(np.int64), radius=radius, units="m",
+              params={"fps": float(fps), "usd_time_codes_per_second": float(fps)})
+    if frames is not None:
+        g.point_frames = np.ascontiguousarray(frames)
+        g.frame_times = np.arange(frames.shape[0], dtype=np.float64)
+    return g.validate()
+
+
+def _atomic_text(path: str, write) -> None:
+    tmp = path + ".tmp"
+    with open(tmp, "w", newline="") as fh:
+        write(fh)
+    os.replace(tmp, path)
+
+
+# --------------------------------------------------------------------------- the command
 def cmd_simulate(args) -> int:
-    if args.scene not in SCENES:
-        raise CLIError(f"unknown scene {args.scene!r} (available: {', '.join(SCENES)})")
+    scene = _load_scene(args)  # before ti.init: scene errors cost no start-up
+    out = args.out or scene.output
+    if not out:
+        raise CLIError("--out is required (the scene file names no [scene] output)")
+    if args.checkpoint_every < 0:
+        raise CLIError("--checkpoint-every must be >= 0 (0: no checkpoints)")
+    if scene.frames < 1 or scene.substeps < 1 or not scene.fps > 0:
+        raise CLIError("--frames and --substeps must be >= 1 and --fps > 0")
+    layout = _output_layout(out)
+    if args.frame_format:
+        from .io import WRITERS, normalize_format
+
+        fmt = normalize_format(args.frame_format)
+        if fmt not in WRITERS:
+            raise CLIError(f"--frame-format {args.frame_format!r} is read-only; writable: {', '.join(WRITERS)}")
+        if layout["kind"] != "folder":
+            raise CLIError("--frame-format applies to a folder output")
+    if layout["kind"] == "usd":
+        from .io.usd import _pxr
+
+        try:
+            _pxr()
+        except Exception as exc:  # noqa: BLE001 - an ImportError with install advice
+            raise CLIError(f"{out}: USD output needs usd-core ({exc})") from None
     ti, arch = _init_taichi(args.arch, args.precision)
     import resource
 
-    from . import SimulationDivergedError, SolverADMM
+    from . import SimulationDivergedError
 
-    if args.frames < 1 or args.substeps < 1 or args.fps <= 0:
-        raise CLIError("--frames and --substeps must be >= 1 and --fps > 0")
-    try:
-        t_build = time.perf_counter()
-        model, cfg, colliders, rotation, scene = _build_scene(args)
-    except ValueError as exc:
-        raise CLIError(str(exc)) from None
-    os.makedirs(args.out, exist_ok=True)
-    dt = 1.0 / (args.fps * args.substeps)
+    t_build = time.perf_counter()
+    model = scene.build_model()
+    dt = 1.0 / (scene.fps * scene.substeps)
     state, control = model.state(), model.control()
-    solver = SolverADMM(model, cfg, profile=args.profile, colliders=colliders)
+    control.gravity = tuple(scene.gravity)
+    solver = scene.make_solver(model, profile=args.profile)
+    admm = scene.solver == "admm"
     t_build = time.perf_counter() - t_build
+
+    def set_bodies(t):
+        for b, (R, T) in enumerate(scene.body_transforms(t)):
+            control.set_body_transform(b, R, T)
+
+    set_bodies(0.0)
+    fingerprint = json.loads(json.dumps({"scene": scene.description, "arch": arch, "precision": args.precision,
+                                         "dt": dt, "solver": scene.solver, "version": 1}, default=str))
+    ckpt = None
+    if args.resume:
+        if not admm:
+            raise CLIError(f"--resume needs the admm solver (this scene uses {scene.solver!r}, which has no "
+                           "checkpoints)")
+        if os.path.exists(layout["checkpoint"]):
+            from .checkpoint import fingerprint_difference, read_checkpoint
+
+            ckpt = read_checkpoint(layout["checkpoint"])
+            diff = fingerprint_difference(ckpt["fingerprint"], fingerprint)
+            if diff:
+                raise CLIError(f"{layout['checkpoint']}: made for a different scene or settings (differs in "
+                               f"{diff}); remove it or drop --resume")
+        elif not args.quiet:
+            print(f"note: no checkpoint at {layout['checkpoint']}; starting from frame 0", file=sys.stderr)
     # Compile every kernel on the real state (kernels are specialised per field), then restore it.
     t_compile = time.perf_counter()
-    snapshot = state.to_numpy()
-    solver.step(state, control, dt)
-    state.load(snapshot)
-    solver.reset_duals()
-    solver.step_count = 0
-    solver.stage_seconds = {k: 0.0 for k in solver.stage_seconds}
+    if admm:
+        snapshot = state.to_numpy()
+        solver.step(state, control, dt)
+        state.load(snapshot)
+        solver.reset_duals()
+        solver.step_count = 0
+        solver.iteration_count = 0
+        solver.stage_seconds = {k: 0.0 for k in solver.stage_seconds}
     t_compile = time.perf_counter() - t_compile
-    with_contacts = solver.contacts is not None
+    with_contacts = getattr(solver, "contacts", None) is not None
     n = model.vertex_count
-    frames = np.zeros((args.frames + 1, n, 3), np.float32)
+    frames = np.zeros((scene.frames + 1, n, 3), np.float32 if args.precision == "f32" else np.float64)
     frames[0] = state.positions()
+    stats_rows = []
+    start = 0
+    if ckpt is not None:
+        state.load(ckpt["state"])
+        solver.restore(ckpt["solver"])
+        start = min(ckpt["frame"], scene.frames)
+        frames[:start + 1] = ckpt["frame_positions"][:start + 1]
+        stats_rows = [r for r in ckpt["stats"] if r["frame"] <= start]
+    radius = np.asarray(model.host["strand_radius"], np.float32) if "strand_radius" in model.host else None
+    if radius is not None and radius.shape != (model.strand_count,):
+        radius = None
+    if layout["kind"] == "folder":
+        os.makedirs(layout["frame_dir"], exist_ok=True)
+    else:
+        os.makedirs(layout["dir"], exist_ok=True)
+    frame_ext = {"thair": ".thair.npz", "usd": ".usdc"}.get(args.frame_format or "thair",
+                                                              "." + (args.frame_format or "thair"))
+
+    def write_frame_file(f):
+        if layout["kind"] != "folder":
+            return
+        from .io import save_groom
+
+        save_groom(_frame_groom(model, frames[f], radius, scene.fps),
+                   os.path.join(layout["frame_dir"], f"frame_{f:05d}{frame_ext}"),
+                   format=args.frame_format or "thair")
+
+    if start == 0:
+        write_frame_file(0)
     rest_len = model.host["edge_rest_length"]
     real_edge = rest_len > 0
     mass = model.host["vertex_mass"]
     tips = model.host["strand_vertex_start"] + model.host["strand_vertex_count"] - 1
-    stats_rows = []
     header = f"{'frame':>5} {'time s':>7} {'ms/frame':>9} {'max |v| m/s':>12} {'max stretch %':>13} " \
              f"{'mean tip y m':>12} {'kinetic J':>11}"
     if with_contacts:
         header += f" {'contacts':>9} {'stick':>7} {'slide':>7} {'max pen. um':>11}"
+    from .progress import Progress
+
+    bar = Progress(scene.frames, initial=start, label="frames", enabled=not args.quiet)
     if not args.quiet:
-        print(f"{args.scene}: {model.strand_count} strands, {n} vertices, arch {arch}, {args.precision}, "
-              f"{args.fps:g} fps x {args.substeps} substeps x {args.iterations} ADMM iterations "
-              f"(set-up {t_build:.2f} s, kernel compilation {t_compile:.2f} s)")
+        iters = getattr(scene.solver_config, "iterations", None)
+        print(f"{scene.name}: {model.strand_count} strands, {n} vertices, solver {scene.solver}, arch {arch}, "
+              f"{args.precision}, {scene.fps:g} fps x {scene.substeps} substeps"
+              + (f" x {iters} iterations" if iters else "")
+              + f" (set-up {t_build:.2f} s, kernel compilation {t_compile:.2f} s)"
+              + (f"; resuming after frame {start}" if start else ""))
         print(header)
+
+    def checkpoint(f):
+        from .checkpoint import write_checkpoint
+
+        write_checkpoint(layout["checkpoint"], state.to_numpy(), solver.checkpoint(), f, frames[:f + 1],
+                         stats_rows, fingerprint)
+
     diverged = None
     t_all = time.perf_counter()
-    completed = 0
-    for f in range(1, args.frames + 1):
+    completed = start
+    for f in range(start + 1, scene.frames + 1):
         t0 = time.perf_counter()
         try:
-            for k in range(args.substeps):
-                t = ((f - 1) * args.substeps + k + 1) * dt
-                control.set_body_transform(0, rotation(t), (0.0, 0.0, 0.0))
+            for k in range(scene.substeps):
+                set_bodies(((f - 1) * scene.substeps + k + 1) * dt)
                 solver.step(state, control, dt)
         except SimulationDivergedError as exc:
             diverged = f"frame {f}: {exc}"
@@ -101,36 +275,57 @@ def cmd_simulate(args) -> int:
         ms = 1e3 * (time.perf_counter() - t0)
         e = np.linalg.norm(np.diff(x.astype(np.float64), axis=0, append=x[-1:]), axis=1)
         stretch = float(np.max(np.abs(e[real_edge] / rest_len[real_edge] - 1.0)))
-        row = dict(frame=f, time=f / args.fps, ms=ms, max_speed=float(np.max(np.linalg.norm(v, axis=1))),
+        row = dict(frame=f, time=f / scene.fps, ms=ms, max_speed=float(np.max(np.linalg.norm(v, axis=1))),
                    max_stretch_percent=100 * stretch, mean_tip_y=float(np.mean(x[tips, 1])),
                    kinetic=float(0.5 * np.sum(mass[:, None] * v.astype(np.float64) ** 2)))
         if with_contacts:
             cs = solver.contact_stats
-            row.update(contacts=cs["contacts"], sticking=cs["sticking"], sliding=cs["sliding"],
-                       max_penetration_m=cs["max_penetration_m"])
+            row.update(contacts=int(cs["contacts"]), sticking=int(cs["sticking"]), sliding=int(cs["sliding"]),
+                       max_penetration_m=float(cs["max_penetration_m"]))
         stats_rows.append(row)
         frames[f] = x
         completed = f
+        write_frame_file(f)
+        if admm and args.checkpoint_every and (f % args.checkpoint_every == 0 or f == scene.frames):
+            checkpoint(f)
         if not args.quiet:
-            print(f"{f:5d} {row['time']:7.3f} {ms:9.1f} {row['max_speed']:12.4f} {row['max_stretch_percent']:13.4f} "
-                  f"{row['mean_tip_y']:12.5f} {row['kinetic']:11.3e}"
-                  + (f" {row['contacts']:9d} {row['sticking']:7d} {row['sliding']:7d} "
-                     f"{1e6 * row['max_penetration_m']:11.2f}" if with_contacts else ""), flush=True)
+            bar.write(f"{f:5d} {row['time']:7.3f} {ms:9.1f} {row['max_speed']:12.4f} "
+                      f"{row['max_stretch_percent']:13.4f} {row['mean_tip_y']:12.5f} {row['kinetic']:11.3e}"
+                      + (f" {row['contacts']:9d} {row['sticking']:7d} {row['sliding']:7d} "
+                         f"{1e6 * row['max_penetration_m']:11.2f}" if with_contacts else ""))
+        bar.update(f, **({"contacts": row["contacts"]} if with_contacts else {}))
+    bar.close()
     wall = time.perf_counter() - t_all
-    out_npz = os.path.join(args.out, "frames.npz")
-    _atomic_savez(out_npz, positions=frames[:completed + 1], fps=np.float64(args.fps),
-                  strand_vertex_start=model.host["strand_vertex_start"],
-                  strand_vertex_count=model.host["strand_vertex_count"],
-                  sphere_radius=np.float64(getattr(scene, "sphere_radius", getattr(scene, "ball_radius", 0.0))))
-    with open(os.path.join(args.out, "stats.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(stats_rows[0].keys()) if stats_rows else ["frame"])
+    run_frames = completed - start
+    if layout["kind"] == "folder":
+        written = layout["frames_npz"]
+        _atomic_savez(written, positions=frames[:completed + 1], fps=np.float64(scene.fps),
+                      strand_vertex_start=model.host["strand_vertex_start"],
+                      strand_vertex_count=model.host["strand_vertex_count"],
+                      sphere_radius=np.float64(scene.description.get("params", {}).get(
+                          "sphere_radius", scene.description.get("params", {}).get("ball_radius", 0.0))))
+    else:
+        from .io import save_groom
+
+        written = layout["file"]
+        save_groom(_frame_groom(model, None, radius, scene.fps, frames[:completed + 1]), written,
+                   format="usd" if layout["kind"] == "usd" else "thair")
+
+    def write_stats(fh):
+        keys = list(stats_rows[0].keys()) if stats_rows else ["frame"]
+        w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(stats_rows)
+
+    _atomic_text(layout["stats"], write_stats)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    summary = dict(scene=args.scene, strands=model.strand_count, vertices=n, frames=completed, arch=arch,
-                   precision=args.precision, wall_seconds=wall, setup_seconds=t_build, compile_seconds=t_compile,
-                   ms_per_frame=1e3 * wall / max(completed, 1), iterations=cfg.iterations, substeps=args.substeps,
-                   mvertex_iterations_per_s=n * cfg.iterations * args.substeps * completed / max(wall, 1e-9) / 1e6,
+    iters = getattr(scene.solver_config, "iterations", 1)
+    summary = dict(scene=scene.name, scene_file=scene.path or None, solver=scene.solver,
+                   strands=model.strand_count, vertices=n, frames=completed, resumed_from_frame=start or None,
+                   arch=arch, precision=args.precision, output=written, wall_seconds=wall, setup_seconds=t_build,
+                   compile_seconds=t_compile, ms_per_frame=1e3 * wall / max(run_frames, 1), iterations=iters,
+                   substeps=scene.substeps,
+                   mvertex_iterations_per_s=n * iters * scene.substeps * run_frames / max(wall, 1e-9) / 1e6,
                    peak_host_memory_mb=peak_mb, diverged=diverged)
     if with_contacts and stats_rows:
         summary["mean_contacts"] = float(np.mean([r["contacts"] for r in stats_rows]))
@@ -141,34 +336,48 @@ def cmd_simulate(args) -> int:
         if not args.quiet:
             print("stage breakdown (ms per step): " + ", ".join(
                 f"{k} {v:.2f}" for k, v in summary["stage_ms_per_step"].items()))
-    with open(os.path.join(args.out, "summary.json"), "w") as fh:
-        json.dump(summary, fh, indent=2)
-    print(f"wrote {completed} frames of {n} vertices to {out_npz} "
-          f"({1e3 * wall / max(completed, 1):.1f} ms/frame, {wall:.1f} s, "
-          f"{summary['mvertex_iterations_per_s']:.2f} M vertex-iterations/s, peak memory {peak_mb:.0f} MB)")
+    _atomic_text(layout["summary"], lambda fh: json.dump(summary, fh, indent=2))
+    print(f"wrote {completed} frames of {n} vertices to {written} "
+          f"({1e3 * wall / max(run_frames, 1):.1f} ms/frame over {run_frames} frames run, {wall:.1f} s, "
+          f"{summary['mvertex_iterations_per_s']:.2f} M vertex-iterations/s, peak memory {peak_mb:.0f} MB"
+          + (f", mean contacts {summary['mean_contacts']:.0f}" if "mean_contacts" in summary else "") + ")")
     if diverged:
         print(f"error: simulation diverged at {diverged}; frames up to {completed} were kept", file=sys.stderr)
         return 1
     return 0
 
 
-
 def register(sub) -> None:
-    s = sub.add_parser("simulate", help="run a scene headless and write its frames")
-    s.add_argument("scene", help="scene name: hang (strands hanging from a nodding sphere, no contacts) or "
-                                 "hairball (Daviet 2023 Sec. 5.2, frictional contacts)")
-    s.add_argument("--out", required=True, help="output folder (frames.npz, stats.csv, summary.json)")
-    s.add_argument("--strands", type=int, default=300)
-    s.add_argument("--length", type=float, default=None, help="strand length [m] (hang 0.2, hairball 0.3)")
-    s.add_argument("--frames", type=int, default=48)
-    s.add_argument("--fps", type=float, default=24.0)
-    s.add_argument("--substeps", type=int, default=4)
-    s.add_argument("--iterations", type=int, default=10, help="ADMM iterations per substep")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--continuous", type=int, default=0, metavar="N",
-                   help="hairball: continuous-time collision detections per substep (paper's CT runs: 3; 0: "
-                        "proximity only)")
+    s = sub.add_parser("simulate", help="run a scene headless and write its frames",
+                       description="Run a scene headless. SCENE: hang, hairball, or a .toml scene file. The "
+                                   "output is a USD file (.usd/.usda/.usdc, time samples), a native groom "
+                                   "(.thair.npz, every frame) or a folder (per-frame files).")
+    s.add_argument("scene", help="scene: hang (strands hanging from a nodding sphere, no contacts), hairball "
+                                 "(Daviet 2023 Sec. 5.2, frictional contacts) or a .toml scene file")
+    s.add_argument("--out", default=None,
+                   help="output: a .usd/.usda/.usdc file, a .thair.npz file, or a folder (frames.npz, "
+                        "frames/, stats.csv, summary.json); default: the scene file's [scene] output")
+    s.add_argument("--strands", type=int, default=None,
+                   help="strands (built-in scenes: 300; a TOML scene: its generator's count, or this many "
+                        "strands kept from its groom file)")
+    s.add_argument("--length", type=float, default=None,
+                   help="strand length [m] (hang 0.2, hairball 0.3; a TOML scene: its generator's mean length)")
+    s.add_argument("--frames", type=int, default=None, help="frames to simulate (default 48 or the scene's)")
+    s.add_argument("--fps", type=float, default=None, help="frames per second (default 24 or the scene's)")
+    s.add_argument("--substeps", type=int, default=None, help="solver steps per frame (default 4 or the scene's)")
+    s.add_argument("--iterations", type=int, default=None,
+                   help="solver iterations per substep (ADMM default 10, or the scene's)")
+    s.add_argument("--seed", type=int, default=None, help="random seed of a procedural groom (default 0)")
+    s.add_argument("--continuous", type=int, default=None, metavar="N",
+                   help="ADMM contacts: continuous-time collision detections per substep (paper's CT runs: 3; "
+                        "0: proximity only)")
+    s.add_argument("--checkpoint-every", type=int, default=10, metavar="K",
+                   help="write a checkpoint every K frames and at the end (ADMM solver; 0: never; default 10)")
+    s.add_argument("--resume", action="store_true",
+                   help="continue from the output's checkpoint (same frames as an uninterrupted run)")
+    s.add_argument("--frame-format", default=None,
+                   help="folder output: format of the per-frame files (thair (default), hair, data, ply, obj, "
+                        "tfx, usd)")
     s.add_argument("--profile", action="store_true", help="time each stage of Algorithm 1 (synchronises after each)")
     _add_common(s)
     s.set_defaults(func=cmd_simulate)
-
