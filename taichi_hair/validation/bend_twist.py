@@ -50,16 +50,22 @@ the gravity term at segment midpoints.
    that eigenvalue (on log Gamma), i.e. the critical length L_c = l_gb Gamma_c^(1/3) and
    curvature kappa_c = phi / L_c.
 
-What the computation gives (``threshold_curve``, N = 200, nu = 0.45; recorded in
-``benchmarks/results/bend_twist/``): see the module's ``literature_comparison`` notes in
-:func:`format_summary`.  Miller et al. 2014 (PRL 112, 068103; the source of Romero et al.'s
-bend-twist test) describe the same picture: a planar curl for short rods, loss of planarity
-when the weight (Gamma) grows at given curvature, helices localised near the free end for
-long rods.  For long rods the curl is confined near the tip, where the tension is low, over a
-length set by kappa and l_gb only, so the threshold tends to a fixed kappa l_gb; this is what
-the computation shows (the curve becomes a line kappa_c l_gb ~ const at large phi).  We did
-not have the text of Romero et al. 2021 at hand, so the comparison with their plotted curve
-is qualitative (shape and asymptote), not number against number.
+What the computation gives (nu = 0.45; map of ``benchmarks/results/bend_twist/bend_twist.png``,
+32 x 32 points): the planar curl is stable (i) for every rod shorter than about phi = 1.8 pi
+(less than one turn: no out-of-plane mode is soft enough), (ii) for weak curvatures
+kappa < 0.31 cm^-1, i.e. kappa l_gb < 1.6, at every phi up to 25 pi (the rod hangs nearly
+straight, its weight dominating the weak curl), and (iii) for strong curvatures above a line
+that rises steeply with kappa (from phi ~ 2 pi at kappa ~ 0.55 cm^-1 to 25 pi at
+2.2 cm^-1; the coil is stiff against its own weight).  In between the planar curl twists out of
+its plane.  Boundary (ii) is vertical at large phi as expected: for long rods the curl lives
+near the free end, where the tension is low, over a length set by kappa and l_gb alone.
+Boundary (iii) follows phi_c ~ (kappa l_gb)^3 (a coil's weight moment Gamma/phi^2 against its
+bending stiffness), e.g. phi_c grows by ~4x from kappa = 1.2 to 2 cm^-1 where (10.6/6.3)^3 = 4.8.
+Miller et al. 2014 (PRL 112, 068103; the source of Romero et al.'s bend-twist test) describe
+the same three regimes (planar curls, localised helices near the free end of long rods, global
+helices).  We did not have the text of Romero et al. 2021 or Miller et al. at hand, so the
+comparison with their plotted threshold is qualitative (the regimes and the asymptotes), not
+number against number.
 
 Simulation choices (where the paper is silent, written down):
 
