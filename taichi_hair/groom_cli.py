@@ -180,6 +180,7 @@ def cmd_render(args) -> int:
     t0 = time.perf_counter()
     viewer.render()
     img = viewer.image()
+    viewer.close()
     _make_parent(args.out)
     save_png(args.out, img)
     print(f"wrote {args.out}: {groom.strand_count} strands, {w}x{h}, eye {tuple(round(c, 4) for c in cam.eye)}, "
@@ -285,11 +286,12 @@ def run_offscreen(args) -> int:
     t0 = time.perf_counter()
     try:
         session.replay(args.script, after_each=after)
+        replay_s = time.perf_counter() - t0
+        draw("end")
     except ValueError as exc:
         raise CLIError(f"{args.script}: {exc}") from None
-    replay_s = time.perf_counter() - t0
-    if not frames or frames[-1]["after"] != "end":
-        draw("end")
+    finally:
+        viewer.close()
     out_groom = os.path.join(args.out, "groom.thair.npz")
     session.save(out_groom)
     session.write_log(os.path.join(args.out, "session.json"))

@@ -461,6 +461,12 @@ class ViewerGGUI:
     def show(self) -> None:
         self.window.show()
 
+    def close(self) -> None:
+        """Destroy the window (and its Vulkan resources); do it before ``ti.init`` runs again."""
+        if self.window is not None:
+            self.window.destroy()
+            self.window = None
+
 
 # =========================================================================== one-call still
 def render_groom(groom, path=None, camera: CameraConfig | None = None, width: int = 640, height: int = 480,

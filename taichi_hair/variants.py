@@ -165,12 +165,31 @@ def make_variants(groom, config: VariantConfig, grooming_config=None, out_dir=".
     if head is not None:
         viewer.set_head(head[0], head[1])
         pts = np.vstack([pts, np.asarray(head[0], np.float64)])
-    viewer.set_camera(CameraConfig.framing(pts, direction=(0.55, 0.25, 1.0), fov=35.0, margin=1.3))
+    viewer.set_camera(CameraConfig.framing(pts, direction=(0.55, 0.25, 1.0), fov=35.0, margin=0.9))
 
     def thumb(g):
         viewer.set_strands(g.points, g.strand_offsets, strand_colors(g, "region"))
         viewer.render()
         return viewer.image()
+
+    try:
+        images, variants = _run_variants(session, config, out_dir, thumb, log)
+    finally:
+        viewer.close()
+    sheet_path = os.path.join(out_dir, "contact_sheet.png")
+    save_png(sheet_path, contact_sheet(images, config.columns))
+    result = {"variants": variants, "contact_sheet": sheet_path, "seconds": time.perf_counter() - t_start,
+              "rebuilds": session.rebuild_count, "updates": session.update_count,
+              "config": {"count": config.count, "seed": config.seed, "actions": config.actions,
+                         "frames": config.frames, "kinds": list(config.kinds)}}
+    with open(os.path.join(out_dir, "variants.json"), "w", encoding="utf-8") as fh:
+        json.dump(result, fh, indent=1)
+    return result
+
+
+def _run_variants(session, config: VariantConfig, out_dir, thumb, log):
+    """The variants' loop of :func:`make_variants`: returns (thumbnails, base first; per-variant records)."""
+    from .render import save_png
 
     images = [thumb(session.groom)]
     variants = []
@@ -194,12 +213,5 @@ def make_variants(groom, config: VariantConfig, grooming_config=None, out_dir=".
         variants.append(entry)
         if log is not None:
             log(f"{name}: " + ", ".join(a["kind"] for a in done) + f" ({entry['seconds']:.1f} s)")
-    sheet_path = os.path.join(out_dir, "contact_sheet.png")
-    save_png(sheet_path, contact_sheet(images, config.columns))
-    result = {"variants": variants, "contact_sheet": sheet_path, "seconds": time.perf_counter() - t_start,
-              "rebuilds": session.rebuild_count, "updates": session.update_count,
-              "config": {"count": config.count, "seed": config.seed, "actions": config.actions,
-                         "frames": config.frames, "kinds": list(config.kinds)}}
-    with open(os.path.join(out_dir, "variants.json"), "w", encoding="utf-8") as fh:
-        json.dump(result, fh, indent=1)
-    return result
+    return images, variants
+
