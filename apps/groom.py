@@ -18,7 +18,8 @@ Mouse and keys (also listed in the side panel):
 * right drag orbits, middle drag (or shift + right drag) pans, ``-``/``=`` zoom (GGUI 1.7 reports no wheel);
 * keys: 1-5 tools, ``u`` undo, ``y`` redo, ``space`` simulation on/off, ``c`` cycles colours,
   ``g`` grows (x1.2) and ``h`` shortens (x0.8) the selection, ``k``/``l`` curl x1.25 / x0.8,
-  ``a`` selects all, ``s`` saves the groom, ``escape`` quits.
+  ``a`` selects all, ``s`` saves the groom, ``r`` reloads the groom file from disk (a file that fails
+  to load leaves the current groom open and shows the loader's message), ``escape`` quits.
 """
 
 from __future__ import annotations
@@ -55,8 +56,9 @@ class GroomApp:
         sim_ms: of which the session's ``advance`` [ms].
     """
 
-    def __init__(self, session, viewer, head=None, save_path=None, make_session=None):
+    def __init__(self, session, viewer, head=None, save_path=None, make_session=None, groom_path=None):
         self.session = session
+        self.groom_path = groom_path
         self.viewer = viewer
         self.head = head
         self.save_path = save_path
@@ -213,6 +215,11 @@ class GroomApp:
             s.select_all()
         elif k == "s":
             self.save()
+        elif k == "r":
+            if self.groom_path is None:
+                self.message = "reload: the groom was generated, not read from a file"
+            else:
+                self.open(self.groom_path)
         elif k in ("-", "="):
             self.zoom(1.1 if k == "-" else 1 / 1.1)
         elif k == "Escape":
@@ -316,7 +323,7 @@ def _panel(app, window):
             s.simulate(sim)
         for label, k in (("grow x1.2 (g)", "g"), ("shorten x0.8 (h)", "h"), ("curl x1.25 (k)", "k"),
                          ("uncurl x0.8 (l)", "l"), ("undo (u)", "u"), ("redo (y)", "y"), ("select all (a)", "a"),
-                         ("colours (c)", "c"), ("save (s)", "s")):
+                         ("colours (c)", "c"), ("save (s)", "s"), ("reload file (r)", "r")):
             if w.button(label):
                 app.key(k)
         w.text(f"colours: {app.color_mode}")
@@ -353,7 +360,8 @@ def run_window(args) -> int:
 
     w, h = args.size
     viewer = ViewerGGUI(w, h, show_window=True, title="taichi-hair groom")
-    app = GroomApp(session, viewer, head, save_path=autosave, make_session=make_session)
+    app = GroomApp(session, viewer, head, save_path=autosave, make_session=make_session,
+                   groom_path=None if args.groom in (None, "default") else args.groom)
     window = viewer.window
     last = None
     print(f"autosave: {autosave} (and its .session.json); compiling the kernels for the first frame can take "

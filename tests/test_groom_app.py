@@ -111,6 +111,10 @@ def test_pin_tool_camera_and_drawing(app):
     app.color_mode = "region"
     app.key("c")
     assert app.color_mode == "strand"
+    # The side panel's widgets run off screen too, and sliders left alone log no edit.
+    n = len(s.log)
+    load_app_module()._panel(app, app.viewer.window)
+    assert len(s.log) == n
 
 
 def test_open_keeps_the_current_groom_when_the_file_fails(app, tmp_path):
@@ -119,6 +123,12 @@ def test_open_keeps_the_current_groom_when_the_file_fails(app, tmp_path):
     before = app.session
     assert app.open(str(bad)) is False
     assert app.session is before and app.message.startswith("open: ") and "broken.hair" in app.message
+    app.groom_path = str(bad)  # the reload key reads the file again: same outcome
+    app.key("r")
+    assert app.session is before and "broken.hair" in app.message
+    good = tmp_path / "good.thair.npz"
+    write_groom(good)
+    assert app.open(str(good)) is True and app.session is not before and app.session.strand_count == NS
 
 
 # --------------------------------------------------------------------------- the command line

@@ -1,0 +1,159 @@
+"""Benchmark of the grooming edit loop (Daviet 2023, Sec. 5.3: 86,000 render strands, 8,600 simulated guides).
+
+A procedural groom (``taichi_hair.generators``, wavy, on ``assets/head.obj``): ``--strands`` render strands
+of ``--vertices`` vertices (default 86,000 x 14: 1.2M render vertices; 10 % guides = 8,600 x 14 = 120k
+simulated vertices).  A :class:`GroomingSession` runs it quasistatically with ``--iterations`` ADMM
+iterations per frame (10, as the paper) and hair-hair proximity contacts (``--contacts on``; the head is
+drawn, not collided, so the contact pipeline is the hair's own).  Each measured frame times, separately
+and synchronised (``ti.sync``):
+
+* simulation: ``SolverADMM.step`` of the guides (contacts included);
+* skinning: ``SkinningLBS.deform`` of every render strand;
+* drawing: GGUI off screen: copy the skinned positions into the line buffer, draw the lines and the head,
+  read the image back (the read-back is what an off-screen tool pays; a window would ``show`` instead).
+
+Also reported: the one-off costs (groom generation, session build, first frame = kernel compilation) and
+an edit: ``scale_length`` on 10 % of the strands followed by one frame, i.e. the in-place Model update.
+
+Usage:
+    python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
+        [--contacts on|off] [--size 960 720] [--out FILE]
+
+JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>.json`` by default.
+"""
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser()
+    p.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan"])
+    p.add_argument("--strands", type=int, default=86000)
+    p.add_argument("--vertices", type=int, default=14)
+    p.add_argument("--guide-ratio", type=float, default=0.1)
+    p.add_argument("--iterations", type=int, default=10)
+    p.add_argument("--contacts", choices=["on", "off"], default="on")
+    p.add_argument("--frames", type=int, default=5, help="measured frames (after 2 warm-up frames)")
+    p.add_argument("--size", type=int, nargs=2, default=(960, 720))
+    p.add_argument("--no-draw", action="store_true", help="skip the GGUI drawing (no Vulkan device)")
+    p.add_argument("--out", default=None)
+    args = p.parse_args(argv)
+
+    import taichi as ti
+
+    ti.init(arch=getattr(ti, args.arch), default_fp=ti.f32, log_level=ti.WARN)
+    arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
+    from taichi_hair.generators import HEAD_MESH_PATH, GeneratorConfig, generate_groom, load_head, read_obj_groups
+    from taichi_hair.grooming import GroomingConfig, GroomingSession
+    from taichi_hair.render import CameraConfig, ViewerGGUI, strand_colors
+
+    res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,
+           "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
+           "image": list(args.size), "machine": platform.processor() or platform.machine(),
+           "cpu_count": os.cpu_count(), "date": datetime.date.today().isoformat(),
+           "command": "python benchmarks/bench_groom.py " + " ".join(sys.argv[1:] if argv is None else argv)}
+
+    t = time.perf_counter()
+    head = load_head()
+    groom = generate_groom(head, GeneratorConfig(style="wavy", strands=args.strands,
+                                                 vertices_per_strand=args.vertices, length=0.25, seed=0))
+    res["generate_s"] = time.perf_counter() - t
+    cfg = GroomingConfig(iterations=args.iterations, guide_ratio=args.guide_ratio,
+                         contacts=args.contacts == "on", autosave_every=0)
+    session = GroomingSession(groom, cfg)
+    t = time.perf_counter()
+    session._ensure_built()
+    res["build_s"] = time.perf_counter() - t
+    sim = session._sim
+    res["guides"] = int(sim.model.strand_count)
+    res["simulated_vertices"] = int(sim.model.vertex_count)
+    res["render_vertices"] = int(groom.vertex_count)
+    print(f"{arch}: {args.strands} strands x {args.vertices} vertices, {res['guides']} guides "
+          f"({res['simulated_vertices']} simulated vertices); generated in {res['generate_s']:.1f} s, "
+          f"session built in {res['build_s']:.1f} s", flush=True)
+
+    viewer = None
+    if not args.no_draw:
+        viewer = ViewerGGUI(args.size[0], args.size[1], show_window=False)
+        v, f, _ = read_obj_groups(HEAD_MESH_PATH)
+        viewer.set_head(v, f)
+        viewer.set_camera(CameraConfig.framing(np.vstack([groom.points, v]), direction=(0.55, 0.25, 1.0)))
+        viewer.set_strands(groom.points, groom.strand_offsets, strand_colors(groom, "region"))
+
+    def frame():
+        t0 = time.perf_counter()
+        sim.solver.step(sim.state, sim.control, 1.0)
+        ti.sync()
+        t1 = time.perf_counter()
+        sim.skin.deform(sim.state, sim.control)
+        ti.sync()
+        t2 = time.perf_counter()
+        if viewer is not None:
+            viewer.set_positions_field(sim.skin.fields.render_vertex_position)
+            viewer.render()
+            viewer.window.get_image_buffer_as_numpy()
+        t3 = time.perf_counter()
+        return 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (t3 - t2)
+
+    t = time.perf_counter()
+    first = frame()
+    res["first_frame_s"] = time.perf_counter() - t
+    res["first_frame_split_ms"] = dict(zip(("simulation", "skinning", "drawing"), first))
+    print(f"first frame (kernel compilation) {res['first_frame_s']:.1f} s: "
+          + ", ".join(f"{k} {v / 1e3:.1f} s" for k, v in res["first_frame_split_ms"].items()), flush=True)
+    frame()
+    rows = []
+    for i in range(args.frames):
+        rows.append(frame())
+        print(f"  frame {i}: simulation {rows[-1][0]:.0f} ms, skinning {rows[-1][1]:.0f} ms, "
+              f"drawing {rows[-1][2]:.0f} ms", flush=True)
+    a = np.array(rows)
+    res["ms_per_frame"] = {k: {"mean": float(a[:, j].mean()), "min": float(a[:, j].min()),
+                               "max": float(a[:, j].max())}
+                           for j, k in enumerate(("simulation", "skinning", "drawing"))}
+    res["ms_per_frame"]["simulation_plus_skinning"] = {"mean": float((a[:, 0] + a[:, 1]).mean())}
+    if sim.solver.contacts is not None:
+        res["contact_stats_last_frame"] = {k: (float(v) if isinstance(v, (int, float, np.number)) else str(v))
+                                           for k, v in dict(sim.solver.contact_stats).items()}
+
+    # An edit: grow 10 % of the strands; the next frame updates the Model in place.
+    session.select_strands(np.arange(0, groom.strand_count, 10))
+    t = time.perf_counter()
+    session.scale_length(1.1)
+    res["edit_scale_length_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    session._ensure_built()
+    ti.sync()
+    res["in_place_update_s"] = time.perf_counter() - t
+    after = frame()
+    res["frame_after_edit_ms"] = dict(zip(("simulation", "skinning", "drawing"), after))
+    res["rebuilds"], res["updates"] = session.rebuild_count, session.update_count
+    print(f"edit: scale_length on {groom.strand_count // 10} strands {res['edit_scale_length_s']:.2f} s (host), "
+          f"in-place update {res['in_place_update_s']:.2f} s, next frame " +
+          ", ".join(f"{k} {v:.0f} ms" for k, v in res["frame_after_edit_ms"].items()), flush=True)
+    m = res["ms_per_frame"]
+    print(f"ms per frame (mean of {args.frames}): simulation {m['simulation']['mean']:.0f}, "
+          f"skinning {m['skinning']['mean']:.0f}, drawing {m['drawing']['mean']:.0f}")
+    out = args.out or os.path.join(HERE, "results", "groom", f"groom_{args.strands}_{arch}.json")
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    with open(out, "w") as fh:
+        json.dump(res, fh, indent=1)
+    print(f"wrote {out}")
+    if viewer is not None:
+        viewer.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
