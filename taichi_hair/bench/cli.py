@@ -1,7 +1,74 @@
-"""``taichi-hair bench``: speed-against-accuracy studies (being written; no sub-command yet)."""
+"""``taichi-hair bench``: speed-against-accuracy studies.
+
+    taichi-hair bench stability --out DIR [--full] [--methods admm,shape,xpbd]
+    taichi-hair bench pareto --out DIR [--full]
+"""
 
 from __future__ import annotations
 
+import time
+
+from ..cli_common import CLIError, _add_common, _init_taichi
+
+STUDIES = ("stability", "pareto")
+
+
+def _parse_methods(text: str) -> tuple:
+    from .stability import METHODS
+
+    methods = tuple(m.strip() for m in text.split(",") if m.strip())
+    bad = [m for m in methods if m not in METHODS]
+    if not methods or bad:
+        raise CLIError(f"--methods must be a comma-separated subset of {','.join(METHODS)}, got {text!r}")
+    return methods
+
+
+def cmd_bench(args) -> int:
+    if args.study not in STUDIES:
+        raise CLIError(f"unknown study {args.study!r} (available: {', '.join(STUDIES)})")
+    methods = _parse_methods(args.methods)
+    if args.duration is not None and not (args.duration > 0):
+        raise CLIError(f"--duration must be > 0, got {args.duration}")
+    if args.study == "pareto":
+        from .pareto import cmd_pareto
+
+        return cmd_pareto(args, methods)
+    ti, arch = _init_taichi(args.arch, args.precision)
+    from .stability import format_summary, run_atlas, write_outputs
+
+    if args.full:
+        dts = (1 / 24, 1 / 48, 1 / 96, 1 / 192, 1 / 384, 1 / 768)
+        knobs = {m: (1, 2, 5, 10, 20, 50, 100) for m in methods}
+    else:
+        dts = (1 / 24, 1 / 96, 1 / 384)
+        knobs = {m: (2, 10, 50) for m in methods}
+    duration = 1.5 if args.duration is None else args.duration
+    t0 = time.perf_counter()
+
+    def progress(text):
+        if not args.quiet:
+            print(f"  [{time.perf_counter() - t0:6.0f} s] {text}", flush=True)
+
+    if not args.quiet:
+        print(f"stability atlas: methods {', '.join(methods)}, dt {', '.join(f'1/{1 / d:.0f}' for d in dts)} s, "
+              f"{duration:g} s simulated per run, arch {arch}, {args.precision}", flush=True)
+    cells = run_atlas(methods, dts, knobs, duration=duration, progress=progress)
+    paths = write_outputs(cells, args.out)
+    print(format_summary(cells))
+    print(f"wrote {', '.join(paths)} in {time.perf_counter() - t0:.0f} s")
+    return 0
+
 
 def register(sub) -> None:
-    """Add the ``bench`` command family to an argparse subparsers object (none registered yet)."""
+    """Add the ``bench`` command family to an argparse subparsers object."""
+    p = sub.add_parser("bench", help="speed-against-accuracy studies: stability atlas, Pareto chart")
+    p.add_argument("study", help="stability or pareto")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--full", action="store_true", help="the bigger grid (longer)")
+    p.add_argument("--methods", default="admm,admm_w1,shape,xpbd",
+                   help="comma-separated subset of admm (w0 = 25), admm_w1 (w0 = 1), shape, xpbd")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
+    p.add_argument("--reference-precision", default="f64", choices=["f32", "f64"],
+                   help="pareto: precision of the converged ADMM reference (its own process)")
+    _add_common(p)
+    p.set_defaults(func=cmd_bench)
