@@ -42,6 +42,9 @@ USD_EXTENSIONS = (".usd", ".usda", ".usdc")
 # --------------------------------------------------------------------------- scenes
 def _named_scene(args):
     """The built-in scenes as :class:`~taichi_hair.scene_file.Scene` objects (their own builders)."""
+    if args.vertices_per_strand is not None:
+        raise CLIError(f"--vertices-per-strand applies to TOML scenes with a generated groom, not {args.scene!r} "
+                       "(use --length)")
     from .config import ContactConfig, SolverADMMConfig
     from .scene_file import BodyAnimation, Scene
     from .scenes import HairballScene, HangScene, build_hairball, build_hang, hairball_rotation, nod_rotation
@@ -83,7 +86,8 @@ def _load_scene(args):
     from .scene_file import load_scene
 
     over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
-                length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous)
+                length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous,
+                vertices_per_strand=args.vertices_per_strand)
     return load_scene(args.scene, over)
 
 
@@ -157,6 +161,25 @@ def cmd_simulate(args) -> int:
 
     from . import SimulationDivergedError
 
+    # Refuse a checkpoint made for another scene before anything is built or compiled.
+    fingerprint = {"scene": scene.description, "arch": arch, "precision": args.precision,
+                   "dt": 1.0 / (scene.fps * scene.substeps), "solver": scene.solver, "version": 1}
+    fingerprint = json.loads(json.dumps(fingerprint, default=str))
+    ckpt = None
+    if args.resume:
+        if scene.solver != "admm":
+            raise CLIError(f"--resume needs the admm solver (this scene uses {scene.solver!r}, which has no "
+                           "checkpoints)")
+        if os.path.exists(layout["checkpoint"]):
+            from .checkpoint import fingerprint_difference, read_checkpoint
+
+            ckpt = read_checkpoint(layout["checkpoint"])
+            diff = fingerprint_difference(ckpt["fingerprint"], fingerprint)
+            if diff:
+                raise CLIError(f"{layout['checkpoint']}: made for a different scene or settings (differs in "
+                               f"{diff}); remove it or drop --resume")
+        elif not args.quiet:
+            print(f"note: no checkpoint at {layout['checkpoint']}; starting from frame 0", file=sys.stderr)
     t_build = time.perf_counter()
     model = scene.build_model()
     dt = 1.0 / (scene.fps * scene.substeps)
@@ -171,23 +194,6 @@ def cmd_simulate(args) -> int:
             control.set_body_transform(b, R, T)
 
     set_bodies(0.0)
-    fingerprint = json.loads(json.dumps({"scene": scene.description, "arch": arch, "precision": args.precision,
-                                         "dt": dt, "solver": scene.solver, "version": 1}, default=str))
-    ckpt = None
-    if args.resume:
-        if not admm:
-            raise CLIError(f"--resume needs the admm solver (this scene uses {scene.solver!r}, which has no "
-                           "checkpoints)")
-        if os.path.exists(layout["checkpoint"]):
-            from .checkpoint import fingerprint_difference, read_checkpoint
-
-            ckpt = read_checkpoint(layout["checkpoint"])
-            diff = fingerprint_difference(ckpt["fingerprint"], fingerprint)
-            if diff:
-                raise CLIError(f"{layout['checkpoint']}: made for a different scene or settings (differs in "
-                               f"{diff}); remove it or drop --resume")
-        elif not args.quiet:
-            print(f"note: no checkpoint at {layout['checkpoint']}; starting from frame 0", file=sys.stderr)
     # Compile every kernel on the real state (kernels are specialised per field), then restore it.
     t_compile = time.perf_counter()
     if admm:
@@ -368,6 +374,8 @@ def register(sub) -> None:
     s.add_argument("--iterations", type=int, default=None,
                    help="solver iterations per substep (ADMM default 10, or the scene's)")
     s.add_argument("--seed", type=int, default=None, help="random seed of a procedural groom (default 0)")
+    s.add_argument("--vertices-per-strand", type=int, default=None,
+                   help="a TOML scene's generated groom: vertices per strand (default: the scene's)")
     s.add_argument("--continuous", type=int, default=None, metavar="N",
                    help="ADMM contacts: continuous-time collision detections per substep (paper's CT runs: 3; "
                         "0: proximity only)")

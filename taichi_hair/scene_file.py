@@ -363,8 +363,8 @@ class Scene:
 
     @property
     def body_count(self) -> int:
-        used = [self.root_body] + [c.body for c in self.colliders]
-        return max(len(self.bodies), 1 + max(used))
+        """Bodies: those of [[bodies]], and at least up to the roots' body."""
+        return max(len(self.bodies), 1 + self.root_body)
 
     def body_transforms(self, time: float):
         """[(R, T)] of every body at ``time`` [s]."""
@@ -467,10 +467,10 @@ def _load_groom_table(t: _Table, base: str, overrides: dict, desc: dict):
         strands = t.get("strands", "int", None, _at_least(1))
         if "strands" in overrides:
             strands = overrides["strands"]
-        for key in ("length", "seed"):
+        for key in ("length", "seed", "vertices_per_strand"):
             if key in overrides:
-                raise SceneError(f"{t.path}: [groom]: --{key} applies to generated grooms; this scene reads "
-                                 f"{files[0]}")
+                raise SceneError(f"{t.path}: [groom]: --{key.replace('_', '-')} applies to generated grooms; "
+                                 f"this scene reads {files[0]}")
         t.done()
         parts = []
         import warnings
@@ -503,7 +503,7 @@ def _load_groom_table(t: _Table, base: str, overrides: dict, desc: dict):
     if surface != "sphere" and any(t.has(k) for k in ("sphere_radius", "sphere_center", "scalp_min_y")):
         t.fail("sphere_radius, sphere_center and scalp_min_y need surface = \"sphere\"")
     values = t.rest()
-    for key in ("strands", "length", "seed"):
+    for key in ("strands", "length", "seed", "vertices_per_strand"):
         if key in overrides:
             values[key] = overrides[key]
     if "down" in values and isinstance(values["down"], list):
@@ -688,8 +688,8 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     Args:
         path: the ``.toml`` file.
         overrides: command-line values that replace the file's: ``frames``, ``fps``, ``substeps``,
-            ``strands`` (generator count, or the strands kept from a file), ``length`` and ``seed``
-            (generators only), ``iterations`` (solver), ``continuous`` (admm contact detections).
+            ``strands`` (generator count, or the strands kept from a file), ``length``, ``seed`` and
+            ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``continuous`` (admm contact detections).
 
     Raises:
         SceneError: naming the file, the table and the key.
@@ -740,6 +740,9 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         raise SceneError(f"{path}: 'bodies' must be an array of tables ([[bodies]])")
     bodies = [_body(_Table(path, f"bodies {i}", b)) for i, b in enumerate(raw)]
     kind, cfg, sdesc = _solver(_Table(path, "solver", data.get("solver", {})), overrides, colliders)
+    import hashlib
+
+    gdesc["points_sha1"] = hashlib.sha1(np.ascontiguousarray(groom.points).tobytes()).hexdigest()
     desc = {"name": name, "fps": fps, "substeps": substeps, "gravity": list(gravity), "groom": gdesc,
             "material": material, "solver": sdesc, "colliders": cdesc,
             "bodies": [b.description for b in bodies]}
@@ -748,5 +751,6 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
                   bodies=bodies, output=_resolve(base, output) if output else "", description=desc)
     for k, c in enumerate(colliders):
         if c.body >= scene.body_count:
-            raise SceneError(f"{path}: [colliders {k}] body: {c.body} is not a body of the scene")
+            raise SceneError(f"{path}: [colliders {k}] body: {c.body} is not a body of the scene (it has "
+                             f"{scene.body_count}: add [[bodies]] tables, or -1 for the static world)")
     return scene

@@ -80,3 +80,56 @@ def test_simulate_hairball_runs_with_contacts_and_reports_them(tmp_path):
 def test_unknown_scene_is_one_line_error(tmp_path):
     proc = run_cli("simulate", "nope", "--out", str(tmp_path))
     assert proc.returncode == 2 and "unknown scene" in proc.stderr and "Traceback" not in proc.stderr
+
+
+HAIRBALL_TOML = os.path.join(ROOT, "assets", "scenes", "hairball.toml")
+
+
+def test_scene_file_resume_equals_an_uninterrupted_run_bit_for_bit(tmp_path):
+    """The shipped hairball scene (12 short strands, 6 fps so that contacts and the ball's turn start within
+    5 frames), run straight for 5 frames, or for 2 frames then resumed to 5 from its end-of-run checkpoint."""
+    args = ["simulate", HAIRBALL_TOML, "--strands", "12", "--length", "0.15", "--vertices-per-strand", "16",
+            "--fps", "6", "--checkpoint-every", "3", "--quiet"]
+    split, straight = tmp_path / "split", tmp_path / "straight"
+    proc = run_cli(*args, "--frames", "2", "--out", str(split))
+    assert proc.returncode == 0, proc.stderr
+    # The interrupted run alone: a folder of per-frame files, finite, roots on the ball, nothing inside it.
+    pos = np.load(split / "frames.npz")["positions"]
+    assert pos.shape == (3, 192, 3) and np.all(np.isfinite(pos))
+    from taichi_hair.io import load_groom
+
+    frame2 = load_groom(split / "frames" / "frame_00002.thair.npz")
+    assert np.array_equal(frame2.points, pos[2]) and frame2.strand_count == 12
+    assert np.linalg.norm(pos[2], axis=1).min() > 0.09 - 1e-4
+    proc = run_cli(*args, "--frames", "5", "--out", str(split), "--resume")
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli(*args, "--frames", "5", "--out", str(straight))
+    assert proc.returncode == 0, proc.stderr
+    a = np.load(straight / "frames.npz")["positions"]
+    b = np.load(split / "frames.npz")["positions"]
+    assert a.shape == b.shape == (6, 192, 3)
+    assert np.array_equal(a, b)
+    assert len(list((split / "frames").glob("frame_*.thair.npz"))) == 6
+    summary = json.loads((split / "summary.json").read_text())
+    assert summary["resumed_from_frame"] == 2 and summary["frames"] == 5 and summary["diverged"] is None
+    with open(split / "stats.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["frame"]) for r in rows] == [1, 2, 3, 4, 5]
+    assert sum(int(r["contacts"]) for r in rows[2:]) > 0  # the resumed part has contacts
+    # A checkpoint made for other settings is refused with one line, before anything compiles.
+    proc = run_cli(*args, "--frames", "6", "--seed", "5", "--out", str(split), "--resume")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "made for a different scene or settings (differs in scene.groom" in proc.stderr.strip().splitlines()[-1]
+
+
+def test_scene_file_errors_are_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[groom]\ngenerator = "wavy"\nlenght = 0.1\n')
+    proc = run_cli("simulate", str(bad), "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    line = proc.stderr.strip().splitlines()[-1]
+    assert line.startswith(f"error: {bad}: [groom]") and "unknown key 'lenght'" in line
+    proc = run_cli("simulate", HAIRBALL_TOML, "--out", str(tmp_path / "o"), "--frame-format", "tfxmesh")
+    assert proc.returncode == 2 and "read-only" in proc.stderr
+    proc = run_cli("simulate", "hang", "--vertices-per-strand", "8", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and "TOML scenes" in proc.stderr
