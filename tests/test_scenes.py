@@ -172,3 +172,41 @@ def test_shipped_scene_runs_headless(tmp_path, name):
         if hasattr(c, "center"):
             centre = R @ c.center + T
             assert np.linalg.norm(pos[2] - centre, axis=1).min() > c.radius - 1e-4
+
+
+def test_shape_and_xpbd_solver_tables(tmp_path):
+    from taichi_hair.solver_shape import SolverShapeConfig
+    from taichi_hair.solver_xpbd import SolverXPBDConfig
+
+    groom = '[groom]\ngenerator = "straight"\nsurface = "sphere"\nstrands = 3\n'
+    s = load_scene(write(tmp_path, groom + '[solver]\ntype = "shape"\nmethod = 1\n[solver.region]\n'
+                                           'global_stiffness = 0.4\n[[colliders]]\ntype = "sphere"\nbody = 0\n'))
+    assert isinstance(s.solver_config, SolverShapeConfig) and s.solver_config.method == 1
+    assert s.solver_config.regions[0].global_stiffness == 0.4 and len(s.solver_config.colliders) == 1
+    with pytest.raises(SceneError, match=r"takes spheres and capsules only"):
+        load_scene(write(tmp_path, groom + '[solver]\ntype = "shape"\n[[colliders]]\ntype = "plane"\n'))
+    with pytest.raises(SceneError, match=r"\[solver.region\].*ShapeRegion.damping"):
+        load_scene(write(tmp_path, groom + '[solver]\ntype = "shape"\n[solver.region]\ndamping = 2.0\n'))
+    s = load_scene(write(tmp_path, groom + '[solver]\ntype = "xpbd"\nsubsteps = 30\n'), {"iterations": 2})
+    assert isinstance(s.solver_config, SolverXPBDConfig) and s.solver_config.substeps == 30
+    assert s.solver_config.iterations == 2
+
+
+def test_progress_lines_when_not_a_terminal():
+    import io
+
+    from taichi_hair.progress import Progress, format_seconds
+
+    buf = io.StringIO()
+    bar = Progress(10, initial=4, stream=buf, interval=1e9)
+    for f in range(5, 11):
+        bar.update(f, contacts=f * 3)
+    bar.close()
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 2  # the first update, then the last (interval not reached in between)
+    assert lines[0].startswith("frames 5/10 [") and "contacts 15" in lines[0] and "eta" in lines[0]
+    assert lines[1].startswith("frames 10/10 [" + "#" * 24 + "] 100%") and "contacts 30" in lines[1]
+    assert format_seconds(3725) == "1:02:05" and format_seconds(65) == "1:05"
+    quiet = io.StringIO()
+    Progress(3, stream=quiet, enabled=False).update(3)
+    assert quiet.getvalue() == ""
