@@ -19,7 +19,8 @@ Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
         [--contacts on|off] [--size 960 720] [--out FILE]
 
-JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>.json`` by default.
+JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>_contacts_<on|off>.json`` by default; a run
+whose simulation diverges writes what it measured and the error (exit code 1).
 """
 
 import argparse
@@ -106,6 +107,22 @@ def main(argv=None):
         t3 = time.perf_counter()
         return 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (t3 - t2)
 
+    from taichi_hair.errors import SimulationDivergedError
+
+    out = args.out or os.path.join(HERE, "results", "groom", f"groom_{args.strands}_{arch}_contacts_{args.contacts}.json")
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    try:
+        return _measure(args, res, frame, session, sim, groom, ti, out, viewer)
+    except SimulationDivergedError as exc:
+        # A result too: written with what was measured before it.
+        res["diverged"] = str(exc)
+        with open(out, "w") as fh:
+            json.dump(res, fh, indent=1)
+        print(f"DIVERGED: {exc}\nwrote {out}")
+        return 1
+
+
+def _measure(args, res, frame, session, sim, groom, ti, out, viewer):
     t = time.perf_counter()
     first = frame()
     res["first_frame_s"] = time.perf_counter() - t
@@ -114,6 +131,7 @@ def main(argv=None):
           + ", ".join(f"{k} {v / 1e3:.1f} s" for k, v in res["first_frame_split_ms"].items()), flush=True)
     frame()
     rows = []
+    res["frames_measured"] = rows
     for i in range(args.frames):
         rows.append(frame())
         print(f"  frame {i}: simulation {rows[-1][0]:.0f} ms, skinning {rows[-1][1]:.0f} ms, "
@@ -145,8 +163,6 @@ def main(argv=None):
     m = res["ms_per_frame"]
     print(f"ms per frame (mean of {args.frames}): simulation {m['simulation']['mean']:.0f}, "
           f"skinning {m['skinning']['mean']:.0f}, drawing {m['drawing']['mean']:.0f}")
-    out = args.out or os.path.join(HERE, "results", "groom", f"groom_{args.strands}_{arch}.json")
-    os.makedirs(os.path.dirname(out), exist_ok=True)
     with open(out, "w") as fh:
         json.dump(res, fh, indent=1)
     print(f"wrote {out}")

@@ -923,33 +923,42 @@ class GroomingSession:
             roots = rest[off[:-1]]
             from scipy.spatial import cKDTree
 
+            from .skinning import _arc_fractions
+
             _, nearest = cKDTree(roots[guides]).query(roots)
+            counts = g.strand_vertex_counts()
+            frac, _ = _arc_fractions(rest, counts)  # per vertex, each strand's own cumulative sum
+            # Vectorised over vertices: the nearest rest arc fraction on the nearest guide, by a
+            # search in keys 2 s + f (sorted: fractions lie in [0, 1], strands are contiguous).
+            strand_of = np.repeat(np.arange(g.strand_count), counts)
+            keys = 2.0 * strand_of + frac
+            gs = guides[nearest[strand_of]]  # the guide strand each vertex follows
+            first = off[gs]
+            idx = np.searchsorted(keys, 2.0 * gs + frac, side="left") - first
+            idx = np.clip(idx, 1, counts[gs] - 1)
+            idx -= (frac - frac[first + idx - 1]) < (frac[first + idx] - frac)
             is_guide = np.zeros(g.strand_count, dtype=bool)
             is_guide[guides] = True
-
-            def fractions(s):
-                _, le = _tangents(rest[off[s]:off[s + 1]])
-                c = np.r_[0.0, np.cumsum(le)]
-                return c / c[-1]
-
-            for s in np.nonzero(~is_guide)[0]:
-                gs = guides[nearest[s]]
-                fg = fractions(gs)
-                fs = fractions(s)
-                idx = np.clip(np.searchsorted(fg, fs), 1, len(fg) - 1)
-                idx -= (fs - fg[idx - 1]) < (fg[idx] - fs)
-                proxy[off[s]:off[s + 1]] = off[gs] + idx
+            skinned = ~is_guide[strand_of]
+            proxy[skinned] = (first + idx)[skinned]
         self._proxy_cache = proxy
         return proxy
 
     def _guide_strands(self) -> np.ndarray:
+        """Farthest-point sampled guides of the roots (cached: edits keep the roots)."""
         g, cfg = self.groom, self.config
         if cfg.guide_ratio >= 1.0:
             return np.arange(g.strand_count)
         from .skinning import select_guides
 
         roots = g.rest_points.astype(np.float64)[g.strand_offsets[:-1]]
-        return np.sort(select_guides(roots, cfg.guide_ratio, cfg.seed))
+        key = (roots.tobytes(), cfg.guide_ratio, cfg.seed)
+        cached = getattr(self, "_guide_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1].copy()
+        guides = np.sort(select_guides(roots, cfg.guide_ratio, cfg.seed))
+        self._guide_cache = (key, guides)
+        return guides.copy()
 
     def _grabbable(self, mask: np.ndarray) -> np.ndarray:
         """Groom vertices (proxies) of ``mask``, without clamped root vertices (local index 0, 1)."""
@@ -1187,10 +1196,11 @@ class GroomingSession:
         sim = self._sim
         fixed = sim.base_fixed.copy()
         body = sim.base_body.copy()
-        pinned = self._grabbable(self.groom.pinned)
-        rows = sim.row_of[pinned]
-        fixed[rows] = 1
-        body[rows] = self.groom.points[pinned].astype(np.float64)
+        if self.groom.pinned.any():  # (the proxy map costs a pass over every vertex)
+            pinned = self._grabbable(self.groom.pinned)
+            rows = sim.row_of[pinned]
+            fixed[rows] = 1
+            body[rows] = self.groom.points[pinned].astype(np.float64)
         sim.drag_rows = np.zeros(0, dtype=np.int64)
         if self._drag is not None:
             sim.drag_rows = sim.row_of[self._drag["vertices"]]

@@ -428,3 +428,33 @@ def test_in_place_update_after_an_edit_equals_a_fresh_session():
     b.advance(3)
     assert b.rebuild_count == 1
     assert same_groom(a.groom, b.groom)
+
+
+def test_proxy_is_the_nearest_arc_fraction_on_the_nearest_guide():
+    """With guide_ratio < 1 a skinned vertex acts through its proxy (vectorised map): a vertex of the
+    nearest guide (by root) with the nearest rest arc fraction."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(1)
+    lines = [np.cumsum(rng.normal(size=(int(rng.integers(3, 12)), 3)) * 0.01, axis=0) + rng.normal(size=3)
+             for _ in range(200)]
+    s = GroomingSession(lines, GroomingConfig(guide_ratio=0.2, contacts=False))
+    proxy = s._proxy()
+    g = s.groom
+    off = g.strand_offsets
+    guides = s.guide_strands
+    roots = g.rest_points[off[:-1]]
+    _, nearest = cKDTree(roots[guides]).query(roots)
+    for k in range(g.strand_count):
+        own = np.arange(off[k], off[k + 1])
+        if k in guides:
+            assert np.array_equal(proxy[own], own)
+            continue
+        gs = guides[nearest[k]]
+        p = strand(g, gs, True)
+        fg = np.r_[0.0, np.cumsum(edge_lengths(p))] / edge_lengths(p).sum()
+        fk = np.r_[0.0, np.cumsum(edge_lengths(strand(g, k, True)))] / edge_lengths(strand(g, k, True)).sum()
+        local = proxy[own] - off[gs]
+        assert np.all((local >= 0) & (local < off[gs + 1] - off[gs]))
+        best = np.abs(fg[None, :] - fk[:, None]).min(axis=1)
+        np.testing.assert_allclose(np.abs(fg[local] - fk), best, atol=1e-12)
