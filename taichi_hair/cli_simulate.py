@@ -336,7 +336,9 @@ def cmd_simulate(args) -> int:
     if with_contacts and stats_rows:
         summary["mean_contacts"] = float(np.mean([r["contacts"] for r in stats_rows]))
         summary["max_penetration_m"] = float(max(r["max_penetration_m"] for r in stats_rows))
-    if args.profile:
+    if args.profile and not hasattr(solver, "stage_seconds"):
+        print(f"note: --profile: solver {scene.solver!r} has no stage timers", file=sys.stderr)
+    elif args.profile:
         steps = max(solver.step_count, 1)
         summary["stage_ms_per_step"] = {k: 1e3 * v / steps for k, v in solver.stage_seconds.items() if v > 0}
         if not args.quiet:
