@@ -642,6 +642,11 @@ def _solver(t: _Table, overrides: dict, colliders: list):
     kind = t.get("type", "str", "admm", lambda v: None if v in SOLVERS else
                  f"must be one of {', '.join(SOLVERS)}, got {v!r}")
     values = t.rest(exclude=("contacts", "region"))
+    if kind != "admm" and overrides.get("continuous"):
+        t.fail(f"--continuous applies to type = \"admm\", not {kind!r}", "type")
+    if kind == "shape" and "iterations" in overrides:
+        t.fail("--iterations applies to type = \"admm\" or \"xpbd\"; set [solver.region] "
+               "local_iterations / length_iterations for \"shape\"", "type")
     if "iterations" in overrides:
         values["iterations"] = overrides["iterations"]
     desc = {"type": kind, **{k: v for k, v in values.items()}}
@@ -649,8 +654,10 @@ def _solver(t: _Table, overrides: dict, colliders: list):
         contacts = t.get("contacts", "table", None)
         if t.has("region"):
             t.fail("[solver.region] is for type = \"shape\"", "region")
-        if contacts is not None or overrides.get("continuous"):
-            ct = _Table(t.path, f"{t.name}.contacts", contacts or {})
+        if contacts is None and overrides.get("continuous"):
+            t.fail("--continuous needs hair contacts: add a [solver.contacts] table", "contacts")
+        if contacts is not None:
+            ct = _Table(t.path, f"{t.name}.contacts", contacts)
             cvalues = ct.rest()
             if overrides.get("continuous"):
                 cvalues["continuous_detections"] = overrides["continuous"]
