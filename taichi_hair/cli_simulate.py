@@ -375,7 +375,8 @@ def register(sub) -> None:
     s.add_argument("--substeps", type=int, default=None, help="solver steps per frame (default 4 or the scene's)")
     s.add_argument("--iterations", type=int, default=None,
                    help="solver iterations per substep (ADMM default 10, or the scene's)")
-    s.add_argument("--seed", type=int, default=None, help="random seed of a procedural groom (default: the scene's, or 0)")
+    s.add_argument("--seed", type=int, default=None,
+                   help="random seed of a procedural groom (default: the scene's, or 0)")
     s.add_argument("--vertices-per-strand", type=int, default=None,
                    help="a TOML scene's generated groom: vertices per strand (default: the scene's)")
     s.add_argument("--continuous", type=int, default=None, metavar="N",

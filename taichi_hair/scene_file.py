@@ -696,7 +696,8 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         path: the ``.toml`` file.
         overrides: command-line values that replace the file's: ``frames``, ``fps``, ``substeps``,
             ``strands`` (generator count, or the strands kept from a file), ``length``, ``seed`` and
-            ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``continuous`` (admm contact detections).
+            ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``continuous`` (admm
+            contact detections).
 
     Raises:
         SceneError: naming the file, the table and the key.
