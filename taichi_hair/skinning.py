@@ -576,7 +576,9 @@ class SkinningLBS:
         """Bind again, into the same fields, after the rest shapes changed in place (the guide
         Model updated by :meth:`Model.update`, the render strands edited) with the same layout:
         same render vertex counts per strand, same guides.  No field is allocated, so no kernel
-        is compiled again; the result equals a new :class:`SkinningLBS` of the same inputs."""
+        is compiled again; the result equals a new :class:`SkinningLBS` of the same inputs.
+        (``frame="material"`` reads the rest frames from a new rest State of the guide Model:
+        that allocates one State per call.)"""
         h = self._binding(strands)
         if not (np.array_equal(h["render_strand_vertex_count"], self.host["render_strand_vertex_count"])
                 and h["render_vertex_bind_edge"].shape == self.host["render_vertex_bind_edge"].shape):

@@ -117,6 +117,33 @@ def test_pin_tool_camera_and_drawing(app):
     assert len(s.log) == n
 
 
+def test_window_session_is_recorded_and_replays(app, tmp_path):
+    """What the window does lands in the session log; ``s`` saves the groom and the log beside it, and
+    the log replayed on the original groom gives the saved groom."""
+    s = app.session
+    cam = app.camera()
+    px, _, _ = project(s.groom.points, cam, app.viewer.width, app.viewer.height)
+    app.tool = "select"
+    app.brush_radius = 0.004
+    app.click(*px[s.groom.strand_offsets[4] + NV - 3])
+    app.key("g")  # grow the selection
+    app.key("k")  # curl it
+    app.tool = "trim"
+    app.click(app.viewer.width / 2, float(px[s.groom.strand_offsets[1:] - 1, 1].min()) - 3.0)
+    app.key("u")
+    app.key("y")
+    app.save_path = str(tmp_path / "edited.thair.npz")
+    app.key("s")
+    assert app.message.startswith("saved")
+    saved = load_groom(tmp_path / "edited.thair.npz")
+    log = json.loads((tmp_path / "edited.session.json").read_text())
+    assert [e["action"] for e in log] == ["simulate", "select_ray", "scale_length", "scale_curl", "trim", "undo",
+                                          "redo"]
+    t = GroomingSession(polylines(), GroomingConfig(contacts=False, guide_ratio=1.0, iterations=3))
+    t.replay(tmp_path / "edited.session.json")
+    assert np.array_equal(t.groom.points, saved.points) and np.array_equal(t.groom.rest_points, saved.rest_points)
+
+
 def test_open_keeps_the_current_groom_when_the_file_fails(app, tmp_path):
     bad = tmp_path / "broken.hair"
     bad.write_bytes(b"HAIR\x05\x00\x00\x00garbage")
