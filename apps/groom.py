@@ -340,6 +340,11 @@ def run_window(args) -> int:
     from taichi_hair.io import load_groom
     from taichi_hair.render import ViewerGGUI
 
+    from taichi_hair.cli_common import CLIError
+
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise CLIError("no display for the window (DISPLAY is not set); replay a session off screen with "
+                       "--offscreen --script SESSION.json --out DIR")
     groom = load_groom_arg(args)
     head = load_head_mesh(args.head)
     cfg = session_config(groom, args)
@@ -359,7 +364,10 @@ def run_window(args) -> int:
                                autosave_path=os.path.splitext(str(path))[0] + ".autosave.thair.npz")
 
     w, h = args.size
-    viewer = ViewerGGUI(w, h, show_window=True, title="taichi-hair groom")
+    try:
+        viewer = ViewerGGUI(w, h, show_window=True, title="taichi-hair groom")
+    except RuntimeError as exc:
+        raise CLIError(f"cannot open the window ({exc}); use --offscreen --script SESSION.json --out DIR") from None
     app = GroomApp(session, viewer, head, save_path=autosave, make_session=make_session,
                    groom_path=None if args.groom in (None, "default") else args.groom)
     window = viewer.window

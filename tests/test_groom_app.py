@@ -228,6 +228,10 @@ def test_bad_session_files_and_bad_grooms_are_one_line_errors(tmp_path, capsys):
         assert rc == 2 and "\n" not in err and "broken.hair" in err, err
     rc = main(["groom", str(groom_path), "--offscreen", "--out", str(tmp_path / "o")] + COMMON)
     assert rc == 2 and "--script" in capsys.readouterr().err
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):  # the window needs a display
+        rc = main(["groom", str(groom_path)] + COMMON)
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and "no display" in err and "--offscreen" in err and "\n" not in err
 
 
 def test_render_command_writes_the_projected_picture(tmp_path, capsys):
