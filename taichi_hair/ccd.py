@@ -8,9 +8,9 @@ within the contact thickness r_a + r_b during that motion:
 
 1. ``swept_boxes``: the box of each edge's four positions (x^t and x of both
    vertices) grown by its radius; the largest vertex displacement.
-2. ``count_cells`` / ``fill_entries``: each edge is entered in every cell of a
-   spatial hash its swept box overlaps (multi-insert, so a fast edge does not
-   widen every other edge's query), counting-sorted by bucket.
+2. ``grid.count_cells`` / ``grid.fill_entries``: each edge is entered in every
+   cell of a spatial hash its swept box overlaps (multi-insert, so a fast edge
+   does not widen every other edge's query), counting-sorted by bucket.
 3. ``find_impacts``: each edge visits the cells of its own box; a pair is
    tested once, in the first cell both ranges share; boxes must overlap;
    pairs that are already contacts of this step, and neighbouring edges of a
@@ -41,7 +41,7 @@ proximity detection; body colliders keep the velocity-grown proximity reach
 
 import taichi as ti
 
-from .grid import bucket_of, cell_of, segment_closest_points
+from .grid import bucket_of, cell_in_range, entry_pair_here, segment_closest_points
 
 vec3 = ti.math.vec3
 ivec3 = ti.types.vector(3, ti.i32)
@@ -56,79 +56,22 @@ NO_IMPACT = 2.0
 
 @ti.kernel
 def swept_boxes(edge: ti.template(), x0: ti.template(), x1: ti.template(), radius: ti.template(),
-                ccd: ti.template(), extent_out: ti.template()):
-    """Swept boxes of real edges; extent_out[0] = largest box side [m], extent_out[1] = longest edge [m]."""
+                boxes: ti.template(), ccd: ti.template()):
+    """Swept boxes of real edges grown by their radius; the largest displacement, box side and edge [m]."""
     ccd.max_displacement[None] = 0.0
-    extent_out[0] = 0.0
-    extent_out[1] = 0.0
+    ccd.max_box_side[None] = 0.0
+    ccd.max_edge_length[None] = 0.0
     for i in x0:
         ti.atomic_max(ccd.max_displacement[None], (x1[i] - x0[i]).norm())
         if edge.edge_rest_length[i] > 0.0:
             r = radius[i]
             lo = ti.min(ti.min(x0[i], x0[i + 1]), ti.min(x1[i], x1[i + 1])) - r
             hi = ti.max(ti.max(x0[i], x0[i + 1]), ti.max(x1[i], x1[i + 1])) + r
-            ccd.edge_box_lo[i] = lo
-            ccd.edge_box_hi[i] = hi
+            boxes.edge_box_lo[i] = lo
+            boxes.edge_box_hi[i] = hi
             side = hi - lo
-            ti.atomic_max(extent_out[0], ti.max(side[0], side[1], side[2]))
-            ti.atomic_max(extent_out[1], (x1[i + 1] - x1[i]).norm())
-
-
-@ti.kernel
-def count_cells(edge: ti.template(), ccd: ti.template(), h: float):
-    """Cell range and cell count of every edge, then the exclusive prefix sum (entry n: the total)."""
-    for i in ccd.edge_cell_lo:
-        cnt = 0
-        if edge.edge_rest_length[i] > 0.0:
-            lo = cell_of(ccd.edge_box_lo[i], h)
-            hi = cell_of(ccd.edge_box_hi[i], h)
-            ccd.edge_cell_lo[i] = lo
-            ccd.edge_cell_hi[i] = hi
-            span = hi - lo + 1
-            cnt = span[0] * span[1] * span[2]
-        else:
-            ccd.edge_cell_lo[i] = ivec3(0)
-            ccd.edge_cell_hi[i] = ivec3(-1)
-        ccd.edge_entry_start[i] = cnt
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        n = ccd.edge_cell_lo.shape[0]
-        run = 0
-        for i in range(n):
-            c = ccd.edge_entry_start[i]
-            ccd.edge_entry_start[i] = run
-            run += c
-        ccd.edge_entry_start[n] = run
-
-
-@ti.kernel
-def fill_entries(ccd: ti.template()):
-    """Counting sort of the (edge, cell) entries by bucket (requires total entries <= capacity)."""
-    t = ccd.table_size
-    for b in ccd.bucket_count:
-        ccd.bucket_count[b] = 0
-        ccd.bucket_cursor[b] = 0
-    for i in ccd.edge_cell_lo:
-        lo = ccd.edge_cell_lo[i]
-        span = ccd.edge_cell_hi[i] - lo + 1
-        for k in range(ccd.edge_entry_start[i + 1] - ccd.edge_entry_start[i]):
-            off = ivec3(k // (span[1] * span[2]), (k // span[2]) % span[1], k % span[2])
-            ti.atomic_add(ccd.bucket_count[bucket_of(lo + off, t)], 1)
-    ti.loop_config(serialize=True)
-    for b in range(t + 1):
-        if b == 0:
-            ccd.bucket_start[0] = 0
-        else:
-            ccd.bucket_start[b] = ccd.bucket_start[b - 1] + ccd.bucket_count[b - 1]
-    for i in ccd.edge_cell_lo:
-        lo = ccd.edge_cell_lo[i]
-        span = ccd.edge_cell_hi[i] - lo + 1
-        for k in range(ccd.edge_entry_start[i + 1] - ccd.edge_entry_start[i]):
-            off = ivec3(k // (span[1] * span[2]), (k // span[2]) % span[1], k % span[2])
-            b = bucket_of(lo + off, t)
-            slot = ccd.bucket_start[b] + ti.atomic_add(ccd.bucket_cursor[b], 1)
-            ccd.entry_edge[slot] = i
-            ccd.entry_cell[slot] = lo + off
+            ti.atomic_max(ccd.max_box_side[None], ti.max(side[0], side[1], side[2]))
+            ti.atomic_max(ccd.max_edge_length[None], (x1[i + 1] - x1[i]).norm())
 
 
 @ti.func
@@ -214,45 +157,38 @@ def _insert_impact(ccd: ti.template(), a: ti.i32, b: ti.i32, toi: float, count: 
 
 @ti.kernel
 def find_impacts(vertex: ti.template(), edge: ti.template(), x0: ti.template(), x1: ti.template(),
-                 radius: ti.template(), ccd: ti.template(), con: ti.template(), h: float):
+                 radius: ti.template(), boxes: ti.template(), ccd: ti.template(), con: ti.template(), h: float):
     """The ``impacts_per_edge`` earliest impacts of every edge (see the module docstring)."""
-    t = ccd.table_size
+    t = boxes.table_size
     K = ti.static(ccd.impacts_per_edge)
     ccd.capped_queries[None] = 0
-    for a in ccd.edge_cell_lo:
+    for a in ccd.edge_impact_count:
         count = 0
         if edge.edge_rest_length[a] > 0.0:
-            lo_a = ccd.edge_cell_lo[a]
-            hi_a = ccd.edge_cell_hi[a]
-            box_lo_a = ccd.edge_box_lo[a]
-            box_hi_a = ccd.edge_box_hi[a]
             sa = vertex.vertex_strand[a]
-            span = hi_a - lo_a + 1
+            lo = boxes.edge_cell_lo[a]
+            box_lo_a = boxes.edge_box_lo[a]
+            box_hi_a = boxes.edge_box_hi[a]
+            span = boxes.edge_cell_hi[a] - lo + 1
             for k in range(span[0] * span[1] * span[2]):
-                cell = lo_a + ivec3(k // (span[1] * span[2]), (k // span[2]) % span[1], k % span[2])
+                cell = cell_in_range(lo, k, span)
                 bkt = bucket_of(cell, t)
-                for e in range(ccd.bucket_start[bkt], ccd.bucket_start[bkt + 1]):
-                    b = ccd.entry_edge[e]
-                    ec = ccd.entry_cell[e]
-                    if b != a and ec[0] == cell[0] and ec[1] == cell[1] and ec[2] == cell[2]:
-                        first = ti.max(lo_a, ccd.edge_cell_lo[b])
-                        if first[0] == cell[0] and first[1] == cell[1] and first[2] == cell[2] and \
-                                not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
-                            blo = ccd.edge_box_lo[b]
-                            bhi = ccd.edge_box_hi[b]
-                            if (box_lo_a <= bhi).all() and (blo <= box_hi_a).all() and \
-                                    not is_contact_pair(con, a, b):
-                                # Evaluate in a fixed order so both edges of a pair get the same time.
-                                p = ti.min(a, b)
-                                q = ti.max(a, b)
-                                toi, capped = accd_edge_edge(x0[p], x0[p + 1], x0[q], x0[q + 1],
-                                                             x1[p] - x0[p], x1[p + 1] - x0[p + 1],
-                                                             x1[q] - x0[q], x1[q + 1] - x0[q + 1],
-                                                             radius[a] + radius[b])
-                                if capped:
-                                    ti.atomic_add(ccd.capped_queries[None], 1)
-                                if toi <= 1.0:
-                                    count = _insert_impact(ccd, a, b, toi, count, K)
+                for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
+                    if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
+                        b = boxes.entry_edge[e]
+                        if b != a and not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1) and \
+                                not is_contact_pair(con, a, b):
+                            # Evaluate in a fixed order so both edges of a pair get the same time.
+                            p = ti.min(a, b)
+                            q = ti.max(a, b)
+                            toi, capped = accd_edge_edge(x0[p], x0[p + 1], x0[q], x0[q + 1],
+                                                         x1[p] - x0[p], x1[p + 1] - x0[p + 1],
+                                                         x1[q] - x0[q], x1[q + 1] - x0[q + 1],
+                                                         radius[a] + radius[b])
+                            if capped:
+                                ti.atomic_add(ccd.capped_queries[None], 1)
+                            if toi <= 1.0:
+                                count = _insert_impact(ccd, a, b, toi, count, K)
         ccd.edge_impact_count[a] = count
 
 

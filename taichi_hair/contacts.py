@@ -247,7 +247,7 @@ class ContactPipeline:
 
     def __init__(self, model, config, colliders=None):
         from .colliders import ColliderSet
-        from .fields import ContactFields, GridFields
+        from .fields import BoxGridFields, ContactFields, GridFields
 
         self.model = model
         self.config = config
@@ -265,7 +265,9 @@ class ContactPipeline:
         table = 1
         while table < 2 * n:
             table *= 2
-        self.grid = GridFields(n, table, config.max_contacts_per_edge)
+        self.grid = GridFields(n, config.max_contacts_per_edge)
+        #: Multi-insert hash of edge boxes, shared by proximity and continuous detection.
+        self.boxes = BoxGridFields(n, table, max(8 * n, 1 << 14))
         capacity = max(16, int(config.capacity_per_vertex * n))
         self.con = ContactFields(capacity, n)
         self.stats_out = ti.field(float, 4)
@@ -313,7 +315,7 @@ class ContactPipeline:
         import numpy as np
 
         from .fields import ContactFields
-        from .grid import build_hash_grid, compute_edge_bounds, find_candidates
+        from .grid import compute_edge_bounds, find_candidates, proximity_boxes
 
         m, cfg, g = self.model, self.config, self.grid
         x, v = state.vertex_position, state.vertex_velocity
@@ -341,12 +343,10 @@ class ContactPipeline:
             sweep *= max_edge / motion
             fall *= max_edge / motion
             motion = max_edge
-        reach = 2.0 * self.max_radius + margin + motion
-        cell = max(0.5 * max_edge, 1e-9)
-        extent = (0.5 * max_edge + reach) * 1.0001
         if cfg.hair_hair:
-            build_hash_grid(m, g, cell)
-            find_candidates(m, m, x, self.vertex_radius, g, cell, margin, sweep, fall, self.max_radius, extent)
+            proximity_boxes(m, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
+            h = self._fill_box_grid(max(max_edge, 1e-9))
+            find_candidates(m, m, x, self.vertex_radius, g, self.boxes, h, margin, sweep, fall)
         else:
             g.edge_candidate_count.fill(0)
         sweep, fall = body_sweep, body_fall
@@ -375,41 +375,25 @@ class ContactPipeline:
     def detect_continuous(self, x0, x) -> int:
         """Continuous-time detection from x0 (begin of step) to x (current iterate); appends the new
         impacts as contacts (module :mod:`taichi_hair.ccd`) and returns how many it added."""
-        import warnings
-
-        from .ccd import (count_cells, count_impact_contacts, fill_entries, find_impacts, swept_boxes,
-                          write_impact_contacts)
+        from .ccd import count_impact_contacts, find_impacts, swept_boxes, write_impact_contacts
         from .fields import CCDFields
 
         m, cfg = self.model, self.config
         if not cfg.hair_hair:
             return 0
         if self.ccd is None:
-            self.ccd = CCDFields(m.vertex_count, self.grid.table_size, max(8 * m.vertex_count, 1 << 14))
-            self._ccd_scalars = ti.field(float, 2)
+            self.ccd = CCDFields(m.vertex_count)
         ccd = self.ccd
-        swept_boxes(m, x0, x, self.vertex_radius, ccd, self._ccd_scalars)
+        swept_boxes(m, x0, x, self.vertex_radius, self.boxes, ccd)
         # Two edges outside each other's proximity reach approach by at most twice the largest
         # displacement: when that is within the proximity margin no impact is possible (skip the pass).
         if 2.0 * float(ccd.max_displacement[None]) <= cfg.margin:
             self.ccd_skipped += 1
             return 0
-        extent, longest = (float(v) for v in self._ccd_scalars.to_numpy())
         # Cells of the longest edge (the paper's size), widened for very fast motion so no swept box spans
         # more than ~5 cells per axis.
-        h = max(longest, 0.25 * extent, 1e-9)
-        count_cells(m, ccd, h)
-        entries = int(ccd.edge_entry_start[m.vertex_count])
-        if entries > ccd.entry_capacity:
-            new_cap = max(2 * ccd.entry_capacity, int(1.25 * entries))
-            warnings.warn(f"continuous detection: {entries} grid entries for a capacity of "
-                          f"{ccd.entry_capacity}; growing it to {new_cap}", stacklevel=3)
-            self.ccd = ccd = CCDFields(m.vertex_count, self.grid.table_size, new_cap)
-            swept_boxes(m, x0, x, self.vertex_radius, ccd, self._ccd_scalars)
-            count_cells(m, ccd, h)
-            self.grow_events += 1
-        fill_entries(ccd)
-        find_impacts(m, m, x0, x, self.vertex_radius, ccd, self.con, h)
+        h = self._fill_box_grid(max(float(ccd.max_edge_length[None]), 0.25 * float(ccd.max_box_side[None]), 1e-9))
+        find_impacts(m, m, x0, x, self.vertex_radius, self.boxes, ccd, self.con, h)
         self.capped_queries += int(ccd.capped_queries[None])
         count_impact_contacts(ccd, self.con)
         first = min(int(self.con.contact_count[None]), self.con.capacity)
@@ -425,6 +409,30 @@ class ContactPipeline:
                             self._dt, self._gn, self._dynamic, first)
         self.continuous_contacts += added
         return added
+
+    def _fill_box_grid(self, h: float) -> float:
+        """Enter every edge box (already in ``self.boxes``) in the cells of size h [m] it overlaps; grow the
+        entry buffer (reported) when it is too small.  Returns h as the kernels see it."""
+        import warnings
+
+        from .fields import BoxGridFields
+        from .grid import count_cells, fill_entries
+
+        m, bx = self.model, self.boxes
+        count_cells(m, bx, h)
+        entries = int(bx.edge_entry_start[m.vertex_count])
+        if entries > bx.entry_capacity:
+            new_cap = max(2 * bx.entry_capacity, int(1.25 * entries))
+            warnings.warn(f"collision grid: {entries} cell entries for a capacity of {bx.entry_capacity}; "
+                          f"growing it to {new_cap}", stacklevel=4)
+            new = BoxGridFields(m.vertex_count, bx.table_size, new_cap)
+            new.edge_box_lo.copy_from(bx.edge_box_lo)
+            new.edge_box_hi.copy_from(bx.edge_box_hi)
+            self.boxes = bx = new
+            count_cells(m, bx, h)
+            self.grow_events += 1
+        fill_entries(bx)
+        return h
 
     def _grow_contacts(self, needed: int, keep: int) -> None:
         """Grow the contact buffers mid-step, keeping the first ``keep`` contacts and the duals."""

@@ -223,30 +223,50 @@ class ContactFields:
         self.vertex_contact_dual = ti.field(vec3, n)
 
 
-class GridFields:
-    """Broad phase: a spatial hash of edge midpoints (counting sort) and per-edge 18-DOPs and candidates.
+class BoxGridFields:
+    """A multi-insert spatial hash of edge boxes (Sec. 4.5 "Collision detection").
 
-    ``table_size`` buckets (a power of two); every field of shape (vertex_count,) is indexed by edge.
+    Every real edge is entered in each cell (of size h, cubic) that its box overlaps;
+    the (edge, cell) entries are counting-sorted by hash bucket, so an edge finds every
+    other edge whose box shares a cell by visiting its own cells only.  Proximity
+    detection uses boxes of the edge grown by its reach; continuous detection boxes of
+    the edge's swept positions.  ``entry_capacity`` entries are allocated up front and
+    grown (reported) when a detection needs more.  Per-edge fields have shape
+    (vertex_count,) (indexed by edge).
     """
 
-    def __init__(self, vertex_count: int, table_size: int, candidates_per_edge: int):
-        n, t, k = vertex_count, table_size, candidates_per_edge
+    def __init__(self, vertex_count: int, table_size: int, entry_capacity: int):
+        n, t, cap = vertex_count, table_size, entry_capacity
         self.table_size = t
+        self.entry_capacity = cap
+        #: Box of each edge: lower and upper corners [m].
+        self.edge_box_lo = ti.field(vec3, n)
+        self.edge_box_hi = ti.field(vec3, n)
+        #: Cell range of each edge's box, inclusive [-]; ghost edges get an empty range.
+        self.edge_cell_lo = ti.Vector.field(3, ti.i32, n)
+        self.edge_cell_hi = ti.Vector.field(3, ti.i32, n)
+        #: Cells per edge, then their exclusive prefix sum; entry n holds the total [-], shape (vertex_count + 1,).
+        self.edge_entry_start = ti.field(ti.i32, n + 1)
+        #: Entries per bucket, start of each bucket, fill cursor [-], shapes (t,), (t + 1,), (t,).
+        self.bucket_count = ti.field(ti.i32, t)
+        self.bucket_start = ti.field(ti.i32, t + 1)
+        self.bucket_cursor = ti.field(ti.i32, t)
+        #: (edge, cell) entries sorted by bucket: the edge [-] and a copy of its box [m] (so that the
+        #: query reads the candidates' boxes sequentially), shape (entry_capacity,).
+        self.entry_edge = ti.field(ti.i32, cap)
+        self.entry_box_lo = ti.field(vec3, cap)
+        self.entry_box_hi = ti.field(vec3, cap)
+
+
+class GridFields:
+    """Proximity broad and narrow phase: per-edge 18-DOPs, velocities and closest candidates.
+
+    Every field of shape (vertex_count,) is indexed by edge.
+    """
+
+    def __init__(self, vertex_count: int, candidates_per_edge: int):
+        n, k = vertex_count, candidates_per_edge
         self.candidates_per_edge = k
-        #: Edges per bucket [-], shape (table_size,); start of each bucket in grid_entry, shape (table_size + 1,).
-        self.grid_cell_count = ti.field(ti.i32, t)
-        self.grid_cell_start = ti.field(ti.i32, t + 1)
-        #: Fill cursor per bucket [-], shape (table_size,).
-        self.grid_cell_cursor = ti.field(ti.i32, t)
-        #: Edge indices sorted by bucket [-], shape (vertex_count,).
-        self.grid_entry = ti.field(ti.i32, n)
-        #: Copies of the DOP centre [m], DOP extents [m] and velocity (mean [m/s], spread [m/s]) of each
-        #: entry, in bucket order, so the candidate search reads memory sequentially.
-        self.grid_entry_center = ti.field(vec3, n)
-        self.grid_entry_extent = ti.field(vec9, n)
-        self.grid_entry_velocity = ti.field(ti.types.vector(4, float), n)
-        #: Bucket of each edge, -1 for ghost edges [-].
-        self.edge_bucket = ti.field(ti.i32, n)
         #: 18-DOP of each edge in 12 floats: centre [m] and half-extents along the 9 DOP axes
         #: (x, y, z, x+-y, x+-z, y+-z, unnormalised) [m].
         self.edge_dop_center = ti.field(vec3, n)
@@ -263,41 +283,20 @@ class GridFields:
         self.edge_emit_count = ti.field(ti.i32, n + 1)
         #: Body contacts emitted by each vertex, then their prefix sum [-], shape (vertex_count + 1,).
         self.vertex_body_emit_count = ti.field(ti.i32, n + 1)
-        #: Scalars: cell size [m], largest edge length [m], largest edge speed |v_e| + spread [m/s].
-        self.cell_size = ti.field(float, ())
+        #: Scalars: largest edge length [m], largest edge speed |v_e| + spread [m/s].
         self.max_edge_length = ti.field(float, ())
         self.max_speed = ti.field(float, ())
 
 
 class CCDFields:
-    """Continuous-time detection (Sec. 4.5, ACCD): swept edge boxes in a multi-insert spatial hash.
+    """Continuous-time detection (Sec. 4.5, ACCD): per-edge earliest impacts.
 
-    Every real edge is inserted in each cell its swept box (begin-of-step and current
-    positions, grown by its radius) overlaps; entries are counting-sorted by hash bucket.
-    ``entry_capacity`` entries are allocated up front and grown when a detection needs more.
     Per-edge fields have shape (vertex_count,) (indexed by edge).
     """
 
-    def __init__(self, vertex_count: int, table_size: int, entry_capacity: int, impacts_per_edge: int = 2):
-        n, t, cap, k = vertex_count, table_size, entry_capacity, impacts_per_edge
-        self.table_size = t
-        self.entry_capacity = cap
+    def __init__(self, vertex_count: int, impacts_per_edge: int = 2):
+        n, k = vertex_count, impacts_per_edge
         self.impacts_per_edge = k
-        #: Swept box of each edge, grown by its radius: lower and upper corners [m].
-        self.edge_box_lo = ti.field(vec3, n)
-        self.edge_box_hi = ti.field(vec3, n)
-        #: Cell range of each edge's swept box, inclusive [-]; ghost edges get an empty range.
-        self.edge_cell_lo = ti.Vector.field(3, ti.i32, n)
-        self.edge_cell_hi = ti.Vector.field(3, ti.i32, n)
-        #: Cells per edge, then their exclusive prefix sum; entry n holds the total [-], shape (vertex_count + 1,).
-        self.edge_entry_start = ti.field(ti.i32, n + 1)
-        #: Entries per bucket, start of each bucket, fill cursor [-], shapes (t,), (t + 1,), (t,).
-        self.bucket_count = ti.field(ti.i32, t)
-        self.bucket_start = ti.field(ti.i32, t + 1)
-        self.bucket_cursor = ti.field(ti.i32, t)
-        #: (edge, cell) entries sorted by bucket [-], shape (entry_capacity,).
-        self.entry_edge = ti.field(ti.i32, cap)
-        self.entry_cell = ti.Vector.field(3, ti.i32, cap)
         #: The earliest impacts of each edge, sorted by (time, other edge): other edge [-] and time of
         #: impact in [0, 1] of the step's motion [-], shape (vertex_count, impacts_per_edge); their number.
         self.edge_impact = ti.field(ti.i32, (n, k))
@@ -305,6 +304,9 @@ class CCDFields:
         self.edge_impact_count = ti.field(ti.i32, n)
         #: Contacts emitted by each edge, then their exclusive prefix sum [-], shape (vertex_count + 1,).
         self.edge_emit_count = ti.field(ti.i32, n + 1)
-        #: Largest vertex displacement |x - x^t| [m] and ACCD loops that hit the iteration cap [-].
+        #: Largest vertex displacement |x - x^t| [m], largest swept-box side [m], longest current edge [m],
+        #: and ACCD loops that hit the iteration cap [-].
         self.max_displacement = ti.field(float, ())
+        self.max_box_side = ti.field(float, ())
+        self.max_edge_length = ti.field(float, ())
         self.capped_queries = ti.field(ti.i32, ())

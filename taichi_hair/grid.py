@@ -2,21 +2,25 @@
 
 1. ``compute_edge_bounds``: per edge, the 18-DOP (stored in 12 floats: the
    midpoint and 9 half-extents, since a segment's DOP is symmetric about its
-   midpoint, as the paper notes), the largest edge length and speed.
-2. ``build_hash_grid``: a counting sort of edge midpoints into the buckets of
-   a spatial hash with cells of half the longest edge.
-3. ``find_candidates``: each edge visits the cells its own bounding box,
-   grown by half the longest edge plus the largest reach, overlaps (every
-   edge within reach has its midpoint there), culls with
-   the DOPs, computes the closest points of the two segments, and keeps the
+   midpoint, as the paper notes), mean velocity and velocity spread; the
+   longest edge and the largest speed.
+2. ``proximity_boxes``: each edge's box grown by its share of the reach (its
+   radius, half the margin, its own sweep), so two edges within reach of each
+   other have overlapping boxes.
+3. ``count_cells`` / ``fill_entries``: a multi-insert spatial hash with cells
+   of the longest edge (the paper's size): each edge is entered in every cell
+   its box overlaps, and the entries are counting-sorted by bucket.
+4. ``find_candidates``: each edge visits its own cells only; a pair is tested
+   once per side, in the first cell both boxes share; boxes, then DOPs cull;
+   the closest points of the two segments decide; each edge keeps the
    ``candidates_per_edge`` (6 in the paper) closest colliding edges, sorted by
    (distance, index) so the result does not depend on the order of the bucket
    fill (which uses atomics): detection is deterministic.
 
 Departure from the paper, written down: the paper's grid is a sparse hash
-grid with one dense subdivision level inside each occupied cell; we use a
-single-level hash of cells of the same size (counting sort as in Genesis),
-which finds the same pairs at a somewhat higher candidate count.
+grid with one dense subdivision level inside each occupied cell; we use one
+level of cells of the longest edge, with each edge entered in all the cells
+its box overlaps, so a query visits ~1-8 cells and no neighbourhood.
 """
 
 import taichi as ti
@@ -24,6 +28,7 @@ import taichi as ti
 from .fields import vec9
 
 vec3 = ti.math.vec3
+ivec3 = ti.types.vector(3, ti.i32)
 
 _DOP_AXES = (
     (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0),
@@ -125,40 +130,97 @@ def compute_edge_bounds(edge: ti.template(), x: ti.template(), v: ti.template(),
 
 
 @ti.kernel
-def build_hash_grid(edge: ti.template(), grid: ti.template(), h: float):
-    """Counting sort of edge midpoints into hash buckets (cell size h [m])."""
-    t = grid.table_size
-    for b in grid.grid_cell_count:
-        grid.grid_cell_count[b] = 0
-        grid.grid_cell_cursor[b] = 0
-    for i in grid.edge_bucket:
-        grid.edge_bucket[i] = -1
+def proximity_boxes(edge: ti.template(), x: ti.template(), radius: ti.template(), grid: ti.template(),
+                    boxes: ti.template(), margin: float, sweep: float, fall: float):
+    """Box of each real edge grown by r + margin/2 + sweep (|v_e| + spread) + fall/2 [m]: two edges whose
+    distance is below their reach (``find_candidates``) have overlapping boxes."""
+    for i in x:
         if edge.edge_rest_length[i] > 0.0:
-            b = bucket_of(cell_of(grid.edge_dop_center[i], h), t)
-            grid.edge_bucket[i] = b
-            ti.atomic_add(grid.grid_cell_count[b], 1)
-    # Exclusive prefix sum over buckets (serial: the table is a few times the edge count).
+            grow = radius[i] + 0.5 * margin + sweep * (grid.edge_velocity[i].norm() + grid.edge_velocity_spread[i]) \
+                + 0.5 * fall
+            boxes.edge_box_lo[i] = ti.min(x[i], x[i + 1]) - grow
+            boxes.edge_box_hi[i] = ti.max(x[i], x[i + 1]) + grow
+
+
+@ti.kernel
+def count_cells(edge: ti.template(), boxes: ti.template(), h: float):
+    """Cell range and cell count of every edge's box, then the exclusive prefix sum (entry n: the total)."""
+    for i in boxes.edge_cell_lo:
+        cnt = 0
+        if edge.edge_rest_length[i] > 0.0:
+            lo = cell_of(boxes.edge_box_lo[i], h)
+            hi = cell_of(boxes.edge_box_hi[i], h)
+            boxes.edge_cell_lo[i] = lo
+            boxes.edge_cell_hi[i] = hi
+            span = hi - lo + 1
+            cnt = span[0] * span[1] * span[2]
+        else:
+            boxes.edge_cell_lo[i] = ivec3(0)
+            boxes.edge_cell_hi[i] = ivec3(-1)
+        boxes.edge_entry_start[i] = cnt
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        n = boxes.edge_cell_lo.shape[0]
+        run = 0
+        for i in range(n):
+            c = boxes.edge_entry_start[i]
+            boxes.edge_entry_start[i] = run
+            run += c
+        boxes.edge_entry_start[n] = run
+
+
+@ti.func
+def cell_in_range(lo, k: ti.i32, span):
+    """The k-th cell of the range starting at ``lo`` with ``span`` cells per axis."""
+    return lo + ivec3(k // (span[1] * span[2]), (k // span[2]) % span[1], k % span[2])
+
+
+@ti.kernel
+def fill_entries(boxes: ti.template()):
+    """Counting sort of the (edge, cell) entries by bucket (requires total entries <= capacity)."""
+    t = boxes.table_size
+    for b in boxes.bucket_count:
+        boxes.bucket_count[b] = 0
+        boxes.bucket_cursor[b] = 0
+    for i in boxes.edge_cell_lo:
+        lo = boxes.edge_cell_lo[i]
+        span = boxes.edge_cell_hi[i] - lo + 1
+        for k in range(boxes.edge_entry_start[i + 1] - boxes.edge_entry_start[i]):
+            ti.atomic_add(boxes.bucket_count[bucket_of(cell_in_range(lo, k, span), t)], 1)
     ti.loop_config(serialize=True)
     for b in range(t + 1):
         if b == 0:
-            grid.grid_cell_start[0] = 0
+            boxes.bucket_start[0] = 0
         else:
-            grid.grid_cell_start[b] = grid.grid_cell_start[b - 1] + grid.grid_cell_count[b - 1]
-    for i in grid.edge_bucket:
-        b = grid.edge_bucket[i]
-        if b >= 0:
-            slot = grid.grid_cell_start[b] + ti.atomic_add(grid.grid_cell_cursor[b], 1)
-            grid.grid_entry[slot] = i
-            grid.grid_entry_center[slot] = grid.edge_dop_center[i]
-            grid.grid_entry_extent[slot] = grid.edge_dop_extent[i]
-            ve = grid.edge_velocity[i]
-            grid.grid_entry_velocity[slot] = ti.Vector([ve[0], ve[1], ve[2], grid.edge_velocity_spread[i]])
+            boxes.bucket_start[b] = boxes.bucket_start[b - 1] + boxes.bucket_count[b - 1]
+    for i in boxes.edge_cell_lo:
+        lo = boxes.edge_cell_lo[i]
+        span = boxes.edge_cell_hi[i] - lo + 1
+        for k in range(boxes.edge_entry_start[i + 1] - boxes.edge_entry_start[i]):
+            cell = cell_in_range(lo, k, span)
+            b = bucket_of(cell, t)
+            slot = boxes.bucket_start[b] + ti.atomic_add(boxes.bucket_cursor[b], 1)
+            boxes.entry_edge[slot] = i
+            boxes.entry_box_lo[slot] = boxes.edge_box_lo[i]
+            boxes.entry_box_hi[slot] = boxes.edge_box_hi[i]
+
+
+@ti.func
+def entry_pair_here(boxes: ti.template(), e: ti.i32, lo_a, box_lo_a, box_hi_a, cell, h: float) -> bool:
+    """Does entry e of the bucket of ``cell`` hold an edge whose box overlaps a's box, with ``cell`` the
+    lowest cell both box ranges share?  Then the pair is tested here and in no other cell (and entries of
+    other cells that hash to the same bucket are skipped).  Reads only the entry (sequential memory)."""
+    blo = boxes.entry_box_lo[e]
+    bhi = boxes.entry_box_hi[e]
+    lo_b = cell_of(blo, h)
+    hi_b = cell_of(bhi, h)
+    first = ti.max(lo_a, lo_b)
+    return (first == cell).all() and (cell <= hi_b).all() and (box_lo_a <= bhi).all() and (blo <= box_hi_a).all()
 
 
 @ti.kernel
 def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
-                    grid: ti.template(), h: float, margin: float, sweep: float, fall: float,
-                    max_radius: float, extent: float):
+                    grid: ti.template(), boxes: ti.template(), h: float, margin: float, sweep: float, fall: float):
     """Keep, per edge, the closest colliding edges, at most K, sorted by (distance, index).
 
     Two edges collide when their distance is below their reach
@@ -166,47 +228,39 @@ def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template()
     edges' mean velocities, s their spreads, sweep = velocity_margin dt and
     fall = velocity_margin |g| dt^2 (one edge may be supported while the other
     falls): a bound on how much closer they can get during the step, from
-    their *relative* motion (hair moving together needs little margin).  The cell size h must exceed the
-    longest edge plus the largest reach (no longer: the query box adapts).
+    their *relative* motion (hair moving together needs little margin).
 
-    Edges of the same strand that share a vertex are skipped.  A bucket reached
-    twice (two neighbouring cells hashing alike) or an edge met twice is
-    de-duplicated by the sorted insertion.
+    Edges of the same strand that share a vertex are skipped.
     """
-    t = grid.table_size
+    t = boxes.table_size
     K = ti.static(grid.candidates_per_edge)
-    for a in grid.edge_bucket:
-        grid.edge_candidate_count[a] = 0
-        if grid.edge_bucket[a] >= 0:
+    for a in grid.edge_candidate_count:
+        count = 0
+        if edge.edge_rest_length[a] > 0.0:
             ca = grid.edge_dop_center[a]
             ea = grid.edge_dop_extent[a]
             ra = radius[a]
             sa = vertex.vertex_strand[a]
             va = grid.edge_velocity[a]
             sa_spread = grid.edge_velocity_spread[a]
-            # Cells whose midpoints can hold a colliding edge: a's box grown by half the longest edge plus
-            # the largest reach (``extent``).  With cells of half an edge this box is ~2 x 1 x 1 edges for
-            # an edge at rest, far less than 27 cells of two edges each.
-            lo = cell_of(ti.min(x[a], x[a + 1]) - extent, h)
-            hi = cell_of(ti.max(x[a], x[a + 1]) + extent, h)
-            span = hi - lo + 1
-            count = 0
-            for nb in range(span[0] * span[1] * span[2]):
-                off = ti.Vector([nb // (span[1] * span[2]), (nb // span[2]) % span[1], nb % span[2]])
-                b_idx = bucket_of(lo + off, t)
-                for e in range(grid.grid_cell_start[b_idx], grid.grid_cell_start[b_idx + 1]):
-                    b = grid.grid_entry[e]
-                    vb = grid.grid_entry_velocity[e]
-                    rel = (va - vec3(vb[0], vb[1], vb[2])).norm() + sa_spread + vb[3]
-                    # radius[b] <= max radius: bound the reach without loading edge b's data first.
-                    reach_max = ra + max_radius + margin + sweep * rel + fall
-                    if b != a and dops_overlap(ca, ea, grid.grid_entry_center[e], grid.grid_entry_extent[e], reach_max):
-                        reach = ra + radius[b] + margin + sweep * rel + fall
-                        if not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
-                            s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-                            if dist < reach:
-                                count = _insert_candidate(grid, a, b, dist, count, K)
-            grid.edge_candidate_count[a] = count
+            lo = boxes.edge_cell_lo[a]
+            box_lo_a = boxes.edge_box_lo[a]
+            box_hi_a = boxes.edge_box_hi[a]
+            span = boxes.edge_cell_hi[a] - lo + 1
+            for k in range(span[0] * span[1] * span[2]):
+                cell = cell_in_range(lo, k, span)
+                bkt = bucket_of(cell, t)
+                for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
+                    if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
+                        b = boxes.entry_edge[e]
+                        if b != a and not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
+                            rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
+                            reach = ra + radius[b] + margin + sweep * rel + fall
+                            if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
+                                s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+                                if dist < reach:
+                                    count = _insert_candidate(grid, a, b, dist, count, K)
+        grid.edge_candidate_count[a] = count
 
 
 @ti.func
