@@ -146,3 +146,26 @@ def test_strand_colors_modes_and_errors():
         CameraConfig(fov=200.0)
     with pytest.raises(ValueError, match="eye and target"):
         CameraConfig(eye=(0, 0, 0), target=(0, 0, 0))
+
+
+def test_error_overlay_measures_the_distance_to_the_skinned_strands():
+    """``--color error``: per strand, the largest distance between the strand and its reconstruction by
+    skinning from the guides; 0 at rest, the displacement of a moved tip on that strand only."""
+    from taichi_hair.groom_cli import skinning_error
+    from taichi_hair.skinning import select_guides
+
+    rng = np.random.default_rng(3)
+    lines = []
+    for s in range(40):
+        root = np.array([0.01 * (s % 8), 0.0, 0.01 * (s // 8)])
+        t = np.linspace(0.0, 0.06, 8)[:, None]
+        lines.append(root + t * np.array([0.0, -1.0, 0.0]) + rng.normal(scale=1e-3, size=(8, 3)) * t)
+    g = Groom.from_polylines(lines, units="m")
+    assert skinning_error(g, 0.25).max() < 1e-6
+    guides = set(select_guides(g.points[g.strand_offsets[:-1]], 0.25, 0).tolist())
+    k = next(s for s in range(40) if s not in guides)
+    moved = g.copy()
+    moved.rest_points = g.points.copy()
+    moved.points[g.strand_offsets[k + 1] - 1] += (0.0, 0.0, 0.004)
+    err = skinning_error(moved, 0.25)
+    assert abs(err[k] - 0.004) < 1e-6 and np.delete(err, k).max() < 1e-6
