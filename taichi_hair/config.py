@@ -133,7 +133,7 @@ class ContactConfig:
     max_contacts_per_edge: int = 6
     projection_iterations: int = 2
     correction_iterations: int = 10
-    capacity_per_vertex: float = 2.0
+    capacity_per_vertex: float = 3.0
     continuous_detections: int = 0
 
     def __post_init__(self):

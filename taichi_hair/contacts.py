@@ -267,7 +267,7 @@ class ContactPipeline:
             table *= 2
         self.grid = GridFields(n, config.max_contacts_per_edge)
         #: Multi-insert hash of edge boxes, shared by proximity and continuous detection.
-        self.boxes = BoxGridFields(n, table, max(8 * n, 1 << 14))
+        self.boxes = BoxGridFields(n, table, max(12 * n, 1 << 14))
         capacity = max(16, int(config.capacity_per_vertex * n))
         self.con = ContactFields(capacity, n)
         self.stats_out = ti.field(float, 4)
