@@ -92,6 +92,8 @@ def main(argv=None):
         viewer.set_camera(CameraConfig.framing(np.vstack([groom.points, v]), direction=(0.55, 0.25, 1.0)))
         viewer.set_strands(groom.points, groom.strand_offsets, strand_colors(groom, "region"))
 
+    res["frames_all_ms"] = []  # every frame as it completes (a diverged run keeps the ones before)
+
     def frame():
         t0 = time.perf_counter()
         sim.solver.step(sim.state, sim.control, 1.0)
@@ -105,6 +107,7 @@ def main(argv=None):
             viewer.render()
             viewer.window.get_image_buffer_as_numpy()
         t3 = time.perf_counter()
+        res["frames_all_ms"].append([1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (t3 - t2)])
         return 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (t3 - t2)
 
     from taichi_hair.errors import SimulationDivergedError
