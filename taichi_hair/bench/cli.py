@@ -1,7 +1,7 @@
 """``taichi-hair bench``: speed-against-accuracy studies.
 
     taichi-hair bench stability --out DIR [--full] [--methods admm,shape,xpbd]
-    taichi-hair bench pareto --out DIR [--full]
+    taichi-hair bench pareto --out DIR [--full] [--scenes cantilever,swing,groom] [--update-data]
 """
 
 from __future__ import annotations
@@ -13,20 +13,27 @@ from ..cli_common import CLIError, _add_common, _init_taichi
 STUDIES = ("stability", "pareto")
 
 
-def _parse_methods(text: str) -> tuple:
-    from .stability import METHODS
+#: Methods each study knows (admm: w0 = 25, admm_w1: w0 = 1, admm_f64: w0 = 1 in double precision).
+STUDY_METHODS = {"stability": ("admm", "admm_w1", "shape", "xpbd"),
+                 "pareto": ("admm", "admm_w1", "admm_f64", "shape", "xpbd")}
 
+
+def _parse_methods(text, study: str) -> tuple:
+    allowed = STUDY_METHODS[study]
+    if text is None:
+        return allowed
     methods = tuple(m.strip() for m in text.split(",") if m.strip())
-    bad = [m for m in methods if m not in METHODS]
+    bad = [m for m in methods if m not in allowed]
     if not methods or bad:
-        raise CLIError(f"--methods must be a comma-separated subset of {','.join(METHODS)}, got {text!r}")
+        raise CLIError(f"--methods must be a comma-separated subset of {','.join(allowed)} for {study}, "
+                       f"got {text!r}")
     return methods
 
 
 def cmd_bench(args) -> int:
     if args.study not in STUDIES:
         raise CLIError(f"unknown study {args.study!r} (available: {', '.join(STUDIES)})")
-    methods = _parse_methods(args.methods)
+    methods = _parse_methods(args.methods, args.study)
     if args.duration is not None and not (args.duration > 0):
         raise CLIError(f"--duration must be > 0, got {args.duration}")
     if args.study == "pareto":
@@ -65,10 +72,13 @@ def register(sub) -> None:
     p.add_argument("study", help="stability or pareto")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--full", action="store_true", help="the bigger grid (longer)")
-    p.add_argument("--methods", default="admm,admm_w1,shape,xpbd",
-                   help="comma-separated subset of admm (w0 = 25), admm_w1 (w0 = 1), shape, xpbd")
-    p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
-    p.add_argument("--reference-precision", default="f64", choices=["f32", "f64"],
-                   help="pareto: precision of the converged ADMM reference (its own process)")
+    p.add_argument("--methods", default=None,
+                   help="comma-separated subset of admm (w0 = 25), admm_w1 (w0 = 1), admm_f64 (pareto only), "
+                        "shape, xpbd (default: all)")
+    p.add_argument("--duration", type=float, default=None, help="stability: simulated seconds per run")
+    p.add_argument("--scenes", default="cantilever,swing,groom", help="pareto: comma-separated scenes")
+    p.add_argument("--groom-strands", type=int, default=192, help="pareto: strands of the groom scene")
+    p.add_argument("--update-data", action="store_true",
+                   help="pareto: also replace the shipped taichi_hair/bench/data/pareto_cpu.csv")
     _add_common(p)
     p.set_defaults(func=cmd_bench)

@@ -1,0 +1,584 @@
+"""Speed against accuracy (issue 4, item 4): ``taichi-hair bench pareto --out DIR``.
+
+Three scenes, every method over its knobs, cost against error, the Pareto front marked.
+
+Scenes (hair of Daviet 2023 Fig. 2 unless stated; no contacts in any scene):
+
+* ``cantilever``: 6 rods from 1 to 30 cm (2.5 mm edges, at least 16), clamped horizontally
+  and released under gravity with a damping of 8 /s (velocity relaxation rate, the same for
+  every method, see :mod:`taichi_hair.bench.stability`), 1.5 s simulated.  Error: the largest
+  distance between a rod's tip and the heavy elastica's tip at the rod's Gamma, over the rod
+  length (analytic reference, :mod:`taichi_hair.validation.elastica`).
+* ``swing``: one 40 cm strand, 80 edges, released from horizontal, swinging for 1 s with a
+  light damping of 0.5 /s.  Error: RMS over 48 sample times (every 1/48 s) and all vertices of
+  |x - x_ref|, over the strand length.
+* ``groom``: 192 wavy strands (20 cm, 20 edges, a 3 mm sine of 4 cm wavelength in their rest
+  shape), rooted on the upper half of a 9 cm sphere and sticking out from it, under a head
+  shake (rotation about the vertical, 0.4 sin(2 pi 1.5 t) rad), damping 0.5 /s, 0.5 s.  Error
+  as for the swing.  There is no head collider: hair goes through the sphere in every method
+  alike (the contact solvers differ between methods and are not what this chart measures).
+
+Reference for ``swing`` and ``groom``: SolverADMM in double precision (its own process:
+``ti.init`` precision is per process), w0 = 25, 50 iterations per step, run at dt = 1/1920 and
+1/3840 s and Richardson-extrapolated (2 x_fine - x_coarse: backward Euler is first order in dt).
+The difference between the two runs (the fine run's own first-order error) is written in
+``pareto.json`` and drawn as a dotted line; the extrapolation removes most of it, but its
+remaining error is not measured.  Choices measured on the swing (f64, ``/tmp`` scripts, figures
+kept here): w0 = 1 is NOT usable for a reference: at 100 iterations and dt = 1/7680 s its
+edges stretched by 2 % and its trajectory left the others by 20 % of L (the weight set from
+bending becomes negligible against M/dt^2, and ADMM stalls); with w0 = 25 the runs at 1/960,
+1/1920, 1/3840 s differ by 1.0 % and 0.59 % (first order), and 50 iterations differ from 100
+by 0.12 % at 1/3840 s.
+
+Methods and knobs (default grid; ``--full`` adds more):
+
+* ``admm`` (w0 = 25, the paper's) and ``admm_w1`` (w0 = 1): dt in {1/96, 1/384} s x iterations
+  in {5, 10, 30};  ``admm_f64``: w0 = 1 in double precision (the precision knob), dt = 1/96 s,
+  iterations in {10, 30}, run in the reference's process.
+* ``shape``: SolverShape Method 1, 2 and 3 (TressFX defaults for the shape stiffnesses) x
+  local/length iterations in {2, 10} at dt = 1/96 s, and Method 2 with 10 iterations at 1/384 s.
+* ``xpbd``: SolverXPBD, dt = 1/96 s, substeps in {5, 20, 80}, one sweep each.
+
+Cost: wall seconds per simulated second per 1,000 vertices, on the arch in use, measured after a
+warm-up step (kernel compilation excluded), one run each: on the shared 2-core VM figures move by
+up to 2x with the load.  Error of a run with non-finite values: infinite (plotted at the top,
+never on the front).
+
+The measured data are copied to ``taichi_hair/bench/data/pareto_cpu.csv`` (with the machine in
+``pareto_cpu.json``) so that the method choice of issue 4 item 6 can read them;
+``taichi-hair bench pareto --out DIR --update-data`` re-measures and replaces them.
+
+Findings, honestly (default grid, ``taichi-hair bench pareto --out benchmarks/results/pareto
+--update-data``, 2026-11-25, 2-core VM shared with other sessions at load 3-6, so costs are
+pessimistic and noisy by up to ~2-3x; 621 s in all, 300 s of it the groom reference):
+
+* ``cantilever`` (analytic error): ADMM owns the whole front, as the issue expects.  ADMM w0 = 1
+  reaches 1.9 % at dt = 1/96 s with 10 iterations and 0.17 % at 1/384 s; the paper's w0 = 25
+  needs 1/384 s and 30 iterations for 2.3 %.  SolverShape (no bending stiffness) and XPBD (80
+  substeps per 1/96 s step) stay at 60-80 % of L.
+* ``swing`` (trajectory error, reference self-difference 0.57 %): ADMM does NOT own the front
+  below ~10 %.  At dt = 1/96 s ADMM's error is ~9.5-9.7 % whatever the iterations (5-30) and the
+  precision: it is backward Euler's numerical damping of the swing, a time-step error, not an
+  iteration error.  XPBD with 80 substeps per 1/96 s step (dt_s = 1/7680 s) gets 2.7 % at a
+  quarter of the cost of ADMM at dt = 1/384 s (4.2-4.4 %).
+* ``groom`` (reference self-difference 2.9 %, so errors below ~3 % cannot be told apart): the
+  front is SolverShape at the cheap end (48 % error), then XPBD and ADMM w0 = 1 alternating:
+  ADMM 15.5 % (1/96 s, 5 iterations), XPBD 8.7 % (20 substeps), ADMM 8.3 % (1/384 s, 5
+  iterations), XPBD 7.0 % (80 substeps).  No method reached "a few percent" in the default
+  grid; ADMM is on the front but does not own it.
+* The precision knob: ADMM in f64 gives the same errors as f32 at the same knobs here (the f32
+  error is not the limit).
+
+Cost is per 1,000 vertices; the swing scene has 81 vertices, so its costs carry the per-step
+Python and launch overhead (about 10x the per-vertex cost of the groom).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..validation.elasticity_params import GRAVITY, HAIR
+
+SCENES = ("cantilever", "swing", "groom")
+#: Constraint weight scale w0 of each ADMM variant.
+ADMM_W0 = {"admm": 25.0, "admm_ref": 25.0, "admm_w1": 1.0, "admm_f64": 1.0}
+#: The reference: two f64 ADMM runs (coarse, fine) [s] and their iterations per step.
+REFERENCE_DTS = (1 / 1920, 1 / 3840)
+REFERENCE_ITERATIONS = 50
+SAMPLE_INTERVAL = 1.0 / 48.0
+DATA_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data")
+
+# --------------------------------------------------------------------------- scenes
+@dataclass
+class Scene:
+    name: str
+    duration: float          # simulated time [s]
+    drag_rate: float         # velocity relaxation rate of the damping [1/s]
+    strand_lengths: np.ndarray  # [m]
+    shake: bool = False
+
+
+def _hair(**kw):
+    from ..config import RodMaterial
+
+    return RodMaterial(radius=HAIR["radius"], density=HAIR["density"], youngs_modulus_bend=HAIR["youngs_modulus_bend"],
+                       poisson_ratio=HAIR["poisson_ratio"], **kw)
+
+
+def cantilever_lengths() -> np.ndarray:
+    return np.geomspace(0.01, 0.30, 6)
+
+
+def build_scene(name: str, groom_strands: int = 192):
+    """(Model, Scene) of one of :data:`SCENES`."""
+    from ..builder import GroomBuilder
+
+    b = GroomBuilder()
+    mat = _hair()
+    if name == "cantilever":
+        lengths = cantilever_lengths()
+        for i, L in enumerate(lengths):
+            n = max(16, int(round(L / 2.5e-3))) + 1
+            x = np.linspace(0.0, L, n)
+            b.add_strand(np.c_[x, np.zeros(n), np.full(n, 0.01 * i)], mat, root_director=(0.0, 0.0, 1.0))
+        return b.finalize(), Scene(name, 1.5, 8.0, lengths)
+    if name == "swing":
+        x = np.linspace(0.0, 0.40, 81)
+        b.add_strand(np.c_[x, np.zeros(81), np.zeros(81)], mat, root_director=(0.0, 0.0, 1.0))
+        return b.finalize(), Scene(name, 1.0, 0.5, np.array([0.40]))
+    if name == "groom":
+        k = np.arange(groom_strands) + 0.5
+        y = k / groom_strands  # upper hemisphere, golden-angle spiral
+        r = np.sqrt(1 - y * y)
+        a = math.pi * (3 - math.sqrt(5)) * k
+        normals = np.c_[r * np.cos(a), y, r * np.sin(a)]
+        s = np.linspace(0.0, 0.20, 21)
+        for nrm in normals:
+            u = np.cross(nrm, [0.0, 0.0, 1.0] if abs(nrm[2]) < 0.9 else [1.0, 0.0, 0.0])
+            u /= np.linalg.norm(u)
+            pts = 0.09 * nrm + s[:, None] * nrm + 0.003 * np.sin(2 * math.pi * s / 0.04)[:, None] * u
+            b.add_strand(pts, mat)
+        model = b.finalize()
+        le = model.host["edge_rest_length"]
+        lengths = np.array([le[s0:s0 + c - 1].sum() for s0, c in model.strand_slices()])
+        return model, Scene(name, 0.5, 0.5, lengths, shake=True)
+    raise ValueError(f"scene must be one of {SCENES}, got {name!r}")
+
+
+def shake_rotation(t: float) -> np.ndarray:
+    """Head rotation about +y at time t [s]: 0.4 sin(2 pi 1.5 t) rad."""
+    a = 0.4 * math.sin(2 * math.pi * 1.5 * t)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+# --------------------------------------------------------------------------- method runs
+@dataclass
+class RunSpec:
+    """One point: ``method`` (admm, admm_w1, admm_f64, admm_ref, shape, xpbd), dt [s] and its knobs."""
+
+    method: str
+    dt: float
+    iterations: int = 0       # ADMM iterations / Shape local+length iterations
+    substeps: int = 0         # XPBD substeps
+    shape_method: int = 0     # SolverShape Method 1/2/3
+
+    @property
+    def family(self) -> str:
+        return {"admm": "admm", "admm_w1": "admm", "admm_f64": "admm", "admm_ref": "admm"}.get(self.method,
+                                                                                             self.method)
+
+    @property
+    def label(self) -> str:
+        if self.family == "admm":
+            return f"dt=1/{1 / self.dt:.0f} it={self.iterations}"
+        if self.method == "shape":
+            return f"M{self.shape_method} dt=1/{1 / self.dt:.0f} it={self.iterations}"
+        return f"dt=1/{1 / self.dt:.0f} sub={self.substeps}"
+
+
+def default_specs(full: bool = False) -> list[RunSpec]:
+    """The f32 sweep (admm_f64 and the reference run in the f64 worker)."""
+    specs = []
+    its = (2, 5, 10, 30, 100) if full else (5, 10, 30)
+    for m in ("admm", "admm_w1"):
+        for dt in ((1 / 48, 1 / 96, 1 / 384) if full else (1 / 96, 1 / 384)):
+            specs += [RunSpec(m, dt, iterations=i) for i in its]
+    for sm in (1, 2, 3):
+        specs += [RunSpec("shape", 1 / 96, iterations=i, shape_method=sm) for i in ((2, 5, 10, 30) if full else (2, 10))]
+    specs.append(RunSpec("shape", 1 / 384, iterations=10, shape_method=2))
+    specs += [RunSpec("xpbd", 1 / 96, substeps=s) for s in ((5, 20, 80, 320) if full else (5, 20, 80))]
+    return specs
+
+
+def f64_specs(full: bool = False) -> list[RunSpec]:
+    its = (5, 10, 30) if full else (10, 30)
+    return [RunSpec("admm_ref", dt, iterations=REFERENCE_ITERATIONS) for dt in REFERENCE_DTS] + \
+           [RunSpec("admm_f64", 1 / 96, iterations=i) for i in its]
+
+
+def _make_solver(spec: RunSpec, model, scene: Scene):
+    rho_a = HAIR["density"] * math.pi * HAIR["radius"] ** 2
+    if spec.family == "admm":
+        from ..config import SolverADMMConfig
+        from ..solver_admm import SolverADMM
+
+        w0 = ADMM_W0[spec.method]
+        return SolverADMM(model, SolverADMMConfig(iterations=spec.iterations, w0=w0,
+                                                  air_viscosity=scene.drag_rate * rho_a, check_finite=False))
+    if spec.method == "shape":
+        from ..solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
+
+        region = ShapeRegion(local_iterations=spec.iterations, length_iterations=spec.iterations,
+                             damping=1.0 - math.exp(-scene.drag_rate * spec.dt))
+        return SolverShape(model, SolverShapeConfig(method=spec.shape_method, regions=(region,), air_drag=0.0,
+                                                    check_finite=False))
+    if spec.method == "xpbd":
+        from ..solver_xpbd import SolverXPBD, SolverXPBDConfig
+
+        return SolverXPBD(model, SolverXPBDConfig(substeps=spec.substeps, damping=scene.drag_rate, check_finite=False))
+    raise ValueError(f"unknown method {spec.method!r}")
+
+
+def _configure(solver, spec: RunSpec, scene: Scene) -> None:
+    """Set the knobs of an existing solver (no recompilation)."""
+    if spec.family == "admm":
+        solver.config.iterations = spec.iterations
+        solver.reset_duals()
+    elif spec.method == "shape":
+        solver.config.method = spec.shape_method
+        r = solver.config.regions[0]
+        r.local_iterations = r.length_iterations = spec.iterations
+        r.damping = 1.0 - math.exp(-scene.drag_rate * spec.dt)
+        solver.upload_regions()
+    else:
+        solver.config.substeps = spec.substeps
+
+
+def _solver_key(spec: RunSpec):
+    return ("admm", ADMM_W0[spec.method]) if spec.family == "admm" else (spec.method, 0.0)
+
+
+def run_specs(scene_name: str, specs, groom_strands: int = 192, progress=None):
+    """Run every spec on one scene; returns a list of dicts with the trajectory samples and timing.
+
+    Trajectories: positions every :data:`SAMPLE_INTERVAL` s, shape (samples, vertex_count, 3), float64.
+    """
+    model, scene = build_scene(scene_name, groom_strands)
+    state, control = model.state(), model.control()
+    control.gravity = (0.0, -GRAVITY, 0.0)
+    solvers = {}
+    out = []
+    for spec in specs:
+        key = _solver_key(spec)
+        if key not in solvers:
+            solvers[key] = _make_solver(spec, model, scene)
+            solvers[key].step(state, control, spec.dt)  # compile outside the timing
+        solver = solvers[key]
+        # One warm-up step with these knobs (a kernel a knob selects compiles on first use), then reset.
+        _configure(solver, spec, scene)
+        solver.step(state, control, spec.dt)
+        _configure(solver, spec, scene)
+        model.reset_state(state)
+        steps = int(round(scene.duration / spec.dt))
+        per_sample = int(round(SAMPLE_INTERVAL / spec.dt))
+        samples = []
+        t0 = time.perf_counter()
+        sim_time = 0.0
+        for k in range(steps):
+            if scene.shake:
+                control.set_body_transform(0, shake_rotation((k + 1) * spec.dt), (0.0, 0.0, 0.0))
+            solver.step(state, control, spec.dt)
+            if (k + 1) % per_sample == 0:
+                ti_sync()
+                sim_time += time.perf_counter() - t0
+                samples.append(state.vertex_position.to_numpy().astype(np.float64))
+                t0 = time.perf_counter()
+        ti_sync()
+        sim_time += time.perf_counter() - t0
+        if scene.shake:
+            control.set_body_transform(0, np.eye(3), (0.0, 0.0, 0.0))
+        traj = np.array(samples)
+        out.append({"spec": asdict(spec), "seconds": sim_time, "vertex_count": model.vertex_count,
+                    "trajectory": traj, "finite": bool(np.all(np.isfinite(traj)))})
+        if progress is not None:
+            progress(f"{scene_name}: {spec.method} {spec.label}: {sim_time:.2f} s")
+    return out, model, scene
+
+
+def ti_sync():
+    import taichi as ti
+
+    ti.sync()
+
+
+# --------------------------------------------------------------------------- errors
+def trajectory_error(traj: np.ndarray, ref: np.ndarray, strand_of_vertex: np.ndarray, lengths: np.ndarray) -> float:
+    """RMS over samples and vertices of |x - x_ref| / (length of the vertex's strand) [-]."""
+    if traj.shape != ref.shape:
+        raise ValueError(f"trajectory shapes differ: {traj.shape} vs {ref.shape}")
+    if not np.all(np.isfinite(traj)):
+        return math.inf
+    d = np.linalg.norm(traj - ref, axis=2) / lengths[strand_of_vertex][None, :]
+    return float(np.sqrt(np.mean(d * d)))
+
+
+def cantilever_error(final_positions: np.ndarray, model, lengths: np.ndarray) -> float:
+    """Largest |tip - tip_elastica| / L over the rods (analytic reference) [-]."""
+    from ..validation.elastica import cantilever_gamma, solve_heavy_elastica
+
+    if not np.all(np.isfinite(final_positions)):
+        return math.inf
+    starts, counts = model.host["strand_vertex_start"], model.host["strand_vertex_count"]
+    err = 0.0
+    for s0, c, L in zip(starts, counts, lengths):
+        sol = solve_heavy_elastica(cantilever_gamma(L, HAIR["radius"], HAIR["density"], HAIR["youngs_modulus_bend"]))
+        tip = final_positions[s0 + c - 1] - final_positions[s0]
+        ref = np.array([sol.width * L, -sol.height * L])
+        err = max(err, float(np.hypot(tip[0] - ref[0], tip[1] - ref[1]) / L))
+    return err
+
+
+# --------------------------------------------------------------------------- worker (own process)
+def _worker_main(argv) -> int:
+    """``python -m taichi_hair.bench.pareto --worker PRECISION SCENES OUT.npz [--full] [--groom-strands N]``."""
+    import pickle
+
+    precision, scenes, out_path = argv[0], argv[1].split(","), argv[2]
+    full = "--full" in argv
+    strands = int(argv[argv.index("--groom-strands") + 1]) if "--groom-strands" in argv else 192
+    import taichi as ti
+
+    ti.init(arch=ti.cpu, default_fp=ti.f64 if precision == "f64" else ti.f32, log_level=ti.WARN)
+    results = {}
+    t0 = time.perf_counter()
+    for sc in scenes:
+        specs = f64_specs(full)
+        if sc == "cantilever":
+            specs = [s for s in specs if s.method != "admm_ref"]
+        res, _, _ = run_specs(sc, specs, strands,
+                              progress=lambda t: print(f"  [f64 worker {time.perf_counter() - t0:5.0f} s] {t}",
+                                                       flush=True))
+        results[sc] = res
+    with open(out_path + ".tmp", "wb") as fh:
+        pickle.dump(results, fh)
+    os.replace(out_path + ".tmp", out_path)
+    return 0
+
+
+def run_f64_worker(scenes, out_path: str, full: bool = False, groom_strands: int = 192, quiet: bool = False):
+    """Run the double-precision reference and ADMM f64 points in a subprocess; returns their results."""
+    import pickle
+
+    cmd = [sys.executable, "-m", "taichi_hair.bench.pareto", "--worker", "f64", ",".join(scenes), out_path,
+           "--groom-strands", str(groom_strands)] + (["--full"] if full else [])
+    proc = subprocess.run(cmd, stdout=None if not quiet else subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if proc.returncode != 0:
+        tail = (proc.stderr or "").strip().splitlines()[-1:] or ["no message"]
+        raise RuntimeError(f"the f64 reference process failed (exit {proc.returncode}): {tail[0]}")
+    with open(out_path, "rb") as fh:
+        return pickle.load(fh)
+
+
+# --------------------------------------------------------------------------- assembly
+@dataclass
+class Point:
+    scene: str
+    method: str
+    precision: str
+    dt: float
+    iterations: int
+    substeps: int
+    shape_method: int
+    label: str
+    cost: float        # wall s per simulated s per 1k vertices
+    error: float
+    on_front: bool = False
+
+
+def pareto_front(costs, errors) -> np.ndarray:
+    """Boolean mask of the non-dominated points (lower cost and lower error are better; inf never on it)."""
+    c, e = np.asarray(costs, float), np.asarray(errors, float)
+    mask = np.zeros(len(c), bool)
+    for i in range(len(c)):
+        if not (np.isfinite(c[i]) and np.isfinite(e[i])):
+            continue
+        dominated = np.any((c <= c[i]) & (e <= e[i]) & ((c < c[i]) | (e < e[i])) & np.isfinite(e))
+        mask[i] = not dominated
+    return mask
+
+
+def assemble(scene_name: str, f32_results, f64_results, model, scene) -> tuple[list[Point], dict]:
+    """Points with cost and error for one scene; info holds the reference's self-difference."""
+    info = {}
+    strand_of = model.host["vertex_strand"]
+    ref = None
+    if scene_name != "cantilever":
+        refs = [r for r in f64_results if r["spec"]["method"] == "admm_ref"]
+        fine = min(refs, key=lambda r: r["spec"]["dt"])
+        coarse = max(refs, key=lambda r: r["spec"]["dt"])
+        # Backward Euler is first order in dt: Richardson extrapolation of the two runs.
+        ref = 2.0 * fine["trajectory"] - coarse["trajectory"]
+        info["reference_self_error"] = trajectory_error(coarse["trajectory"], fine["trajectory"], strand_of,
+                                                        scene.strand_lengths)
+        info["reference_seconds"] = fine["seconds"] + coarse["seconds"]
+    points = []
+    for r, precision in [(r, "f32") for r in f32_results] + [(r, "f64") for r in f64_results
+                                                                 if r["spec"]["method"] != "admm_ref"]:
+        spec = RunSpec(**r["spec"])
+        cost = r["seconds"] / scene.duration / (r["vertex_count"] / 1000.0)
+        if scene_name == "cantilever":
+            err = cantilever_error(r["trajectory"][-1], model, scene.strand_lengths)
+        else:
+            err = trajectory_error(r["trajectory"], ref, strand_of, scene.strand_lengths)
+        points.append(Point(scene_name, spec.method, precision, spec.dt, spec.iterations, spec.substeps,
+                            spec.shape_method, spec.label, cost, err))
+    front = pareto_front([p.cost for p in points], [p.error for p in points])
+    for p, f in zip(points, front):
+        p.on_front = bool(f)
+    return points, info
+
+
+# --------------------------------------------------------------------------- outputs
+CSV_FIELDS = ("scene", "method", "precision", "dt_s", "iterations", "substeps", "shape_method",
+              "cost_s_per_sim_s_per_kvertex", "error", "on_front")
+
+
+def write_csv(points, path: str) -> None:
+    with open(path + ".tmp", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(CSV_FIELDS)
+        for p in points:
+            w.writerow([p.scene, p.method, p.precision, f"{p.dt:.6g}", p.iterations, p.substeps, p.shape_method,
+                        f"{p.cost:.10g}", "inf" if not math.isfinite(p.error) else f"{p.error:.10g}", int(p.on_front)])
+    os.replace(path + ".tmp", path)
+
+
+def read_csv(path: str) -> list[Point]:
+    """Points of a ``pareto.csv`` (or the shipped ``data/pareto_cpu.csv``)."""
+    pts = []
+    with open(path, newline="") as fh:
+        for row in csv.DictReader(fh):
+            pts.append(Point(row["scene"], row["method"], row["precision"], float(row["dt_s"]), int(row["iterations"]),
+                             int(row["substeps"]), int(row["shape_method"]), "",
+                             float(row["cost_s_per_sim_s_per_kvertex"]), float(row["error"]), row["on_front"] == "1"))
+    return pts
+
+
+COLORS = {"admm": "C3", "admm_w1": "C1", "admm_f64": "C5", "shape": "C0", "xpbd": "C2"}
+
+
+def plot(points, infos: dict, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = list(dict.fromkeys(p.scene for p in points))
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 4.6))
+    axes = np.atleast_1d(axes)
+    for ax, sc in zip(axes, scenes):
+        ps = [p for p in points if p.scene == sc]
+        finite = [p.error for p in ps if math.isfinite(p.error)]
+        top = max(finite) * 3 if finite else 1.0
+        for m in dict.fromkeys(p.method for p in ps):
+            mp = sorted([p for p in ps if p.method == m], key=lambda p: p.cost)
+            c = np.array([p.cost for p in mp])
+            e = np.array([p.error if math.isfinite(p.error) else top for p in mp])
+            own = pareto_front(c, [p.error for p in mp])
+            ax.plot(c[own], e[own], "-", color=COLORS.get(m, "k"), lw=1.2)
+            ax.plot(c, e, "o", color=COLORS.get(m, "k"), ms=4, mfc="none", label=m)
+            bad = ~np.isfinite([p.error for p in mp])
+            if bad.any():
+                ax.plot(c[bad], e[bad], "x", color=COLORS.get(m, "k"), ms=7)
+        fr = sorted([p for p in ps if p.on_front], key=lambda p: p.cost)
+        ax.plot([p.cost for p in fr], [p.error for p in fr], "k--", lw=1, label="Pareto front (all methods)")
+        ax.plot([p.cost for p in fr], [p.error for p in fr], "ks", ms=7, mfc="none")
+        if "reference_self_error" in infos.get(sc, {}):
+            ax.axhline(infos[sc]["reference_self_error"], color="0.5", ls=":", lw=1,
+                       label="reference's fine run vs its coarse run")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        from matplotlib.ticker import NullFormatter
+
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("cost: wall s / simulated s / 1k vertices")
+        ax.set_ylabel("error (cantilever: tip vs elastica / L; else RMS trajectory / L)")
+        ax.set_title(sc, fontsize=10)
+        ax.grid(True, which="both", alpha=0.25)
+        ax.legend(fontsize=7)
+    fig.suptitle("Speed against accuracy (x: non-finite, drawn at the top)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path + ".tmp.png", dpi=110)
+    plt.close(fig)
+    os.replace(path + ".tmp.png", path)
+
+
+def format_summary(points, infos) -> str:
+    lines = []
+    for sc in dict.fromkeys(p.scene for p in points):
+        ps = [p for p in points if p.scene == sc]
+        fr = sorted([p for p in ps if p.on_front], key=lambda p: p.cost)
+        extra = ""
+        if "reference_self_error" in infos.get(sc, {}):
+            extra = f" (reference self-difference {infos[sc]['reference_self_error']:.2e})"
+        lines.append(f"{sc}: {len(ps)} points; Pareto front{extra}:")
+        for p in fr:
+            lines.append(f"    {p.method:9s} {p.precision} {p.label:28s} cost {p.cost:9.4g}  error {p.error:.3g}")
+        for m in dict.fromkeys(p.method for p in ps):
+            best = min((p for p in ps if p.method == m), key=lambda p: p.error)
+            lines.append(f"  best {m:9s}: error {best.error:.3g} at cost {best.cost:.4g} ({best.label})")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- command
+def cmd_pareto(args, methods) -> int:
+    """``taichi-hair bench pareto``: f64 worker (reference, admm_f64), then the f32 sweep in this process."""
+    from ..cli_common import CLIError, _init_taichi
+
+    scenes = tuple(s.strip() for s in args.scenes.split(",") if s.strip())
+    bad = [s for s in scenes if s not in SCENES]
+    if not scenes or bad:
+        raise CLIError(f"--scenes must be a comma-separated subset of {','.join(SCENES)}, got {args.scenes!r}")
+    if args.groom_strands < 1:
+        raise CLIError(f"--groom-strands must be >= 1, got {args.groom_strands}")
+    if args.precision != "f32":
+        raise CLIError("bench pareto runs its sweep in f32 and the reference in f64 itself; drop --precision")
+    os.makedirs(args.out, exist_ok=True)
+    t0 = time.perf_counter()
+    quiet = args.quiet
+
+    def say(text):
+        if not quiet:
+            print(f"  [{time.perf_counter() - t0:6.0f} s] {text}", flush=True)
+
+    if not quiet:
+        print(f"pareto: scenes {', '.join(scenes)}; f64 reference process first, then the f32 sweep", flush=True)
+    f64 = run_f64_worker(scenes, os.path.join(args.out, "f64_runs.pkl"), args.full, args.groom_strands, quiet)
+    ti, arch = _init_taichi(args.arch, "f32")
+    specs = [s for s in default_specs(args.full) if s.method in methods]
+    points, infos = [], {}
+    for sc in scenes:
+        res, model, scene = run_specs(sc, specs, args.groom_strands, progress=say)
+        f64_res = [r for r in f64[sc] if r["spec"]["method"] == "admm_ref" or r["spec"]["method"] in methods]
+        pts, info = assemble(sc, res, f64_res, model, scene)
+        points += pts
+        infos[sc] = info
+    os.remove(os.path.join(args.out, "f64_runs.pkl"))
+    csv_path = os.path.join(args.out, "pareto.csv")
+    write_csv(points, csv_path)
+    png_path = os.path.join(args.out, "pareto.png")
+    plot(points, infos, png_path)
+    import platform
+
+    meta = {"arch": arch, "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.platform()}", "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+            "full": bool(args.full), "groom_strands": args.groom_strands, "scenes": infos,
+            "seconds": round(time.perf_counter() - t0, 1)}
+    with open(os.path.join(args.out, "pareto.json"), "w") as fh:
+        json.dump(meta, fh, indent=1)
+    print(format_summary(points, infos))
+    written = [csv_path, png_path, os.path.join(args.out, "pareto.json")]
+    if args.update_data:
+        os.makedirs(DATA_DIR, exist_ok=True)
+        write_csv(points, os.path.join(DATA_DIR, "pareto_cpu.csv"))
+        with open(os.path.join(DATA_DIR, "pareto_cpu.json"), "w") as fh:
+            json.dump(meta, fh, indent=1)
+        written.append(os.path.join(DATA_DIR, "pareto_cpu.csv"))
+    print(f"wrote {', '.join(written)} in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--worker":
+        sys.exit(_worker_main(sys.argv[2:]))
+    print("usage: taichi-hair bench pareto --out DIR", file=sys.stderr)
+    sys.exit(2)
