@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from taichi_hair.bench.stability import (RodCase, default_cases, StabilityThresholds, StrandMonitor, build_case_model, classify,
-                                         make_solver, reference_tip_drop, run_and_classify, run_atlas,
-                                         write_outputs)
+from taichi_hair.bench.stability import (RodCase, StabilityThresholds, StrandMonitor, build_case_model, classify,
+                                         default_cases, make_solver, reference_tip_drop, run_and_classify,
+                                         run_atlas, write_outputs)
 
 
 def test_classify_rules():

@@ -194,7 +194,8 @@ def default_specs(full: bool = False) -> list[RunSpec]:
         for dt in ((1 / 48, 1 / 96, 1 / 384) if full else (1 / 96, 1 / 384)):
             specs += [RunSpec(m, dt, iterations=i) for i in its]
     for sm in (1, 2, 3):
-        specs += [RunSpec("shape", 1 / 96, iterations=i, shape_method=sm) for i in ((2, 5, 10, 30) if full else (2, 10))]
+        its = (2, 5, 10, 30) if full else (2, 10)
+        specs += [RunSpec("shape", 1 / 96, iterations=i, shape_method=sm) for i in its]
     specs.append(RunSpec("shape", 1 / 384, iterations=10, shape_method=2))
     specs += [RunSpec("xpbd", 1 / 96, substeps=s) for s in ((5, 20, 80, 320) if full else (5, 20, 80))]
     return specs
@@ -560,7 +561,8 @@ def cmd_pareto(args, methods) -> int:
     plot(points, infos, png_path)
     import platform
 
-    meta = {"arch": arch, "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.platform()}", "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+    meta = {"arch": arch, "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.platform()}",
+            "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
             "full": bool(args.full), "groom_strands": args.groom_strands, "scenes": infos,
             "seconds": round(time.perf_counter() - t0, 1)}
     with open(os.path.join(args.out, "pareto.json"), "w") as fh:

@@ -19,7 +19,8 @@ w0 = 25; ``admm_w1``: the same with w0 = 1; ``shape``: :class:`SolverShape` (Tre
   stiffnesses, the ADMM paper's second hard case (Sec. 6.1).
 
 Every run simulates ``duration`` (1.5) seconds with the same physical damping for all methods (a
-velocity relaxation rate ``drag_rate`` = 8 /s, so oscillation amplitudes decay as exp(-4 t): ADMM air drag xi = rate rho A, SolverShape's Verlet
+velocity relaxation rate ``drag_rate`` = 8 /s, so oscillation amplitudes decay as exp(-4 t):
+ADMM air drag xi = rate rho A, SolverShape's Verlet
 damping c = 1 - exp(-rate dt), XPBD's damping = rate), so a stable run ends near the
 cantilever's equilibrium.  Each cell (method, case, dt, knob) is classified by
 :func:`classify`:
@@ -169,7 +170,8 @@ def build_case_model(cases):
     b = GroomBuilder()
     for i, c in enumerate(cases):
         x = np.concatenate([[0.0], np.cumsum(c.edge_lengths)])
-        mat = RodMaterial(radius=HAIR["radius"], density=HAIR["density"], youngs_modulus_bend=HAIR["youngs_modulus_bend"],
+        mat = RodMaterial(radius=HAIR["radius"], density=HAIR["density"],
+                          youngs_modulus_bend=HAIR["youngs_modulus_bend"],
                           youngs_modulus_stretch=HAIR["youngs_modulus_bend"] * c.stretch_ratio,
                           poisson_ratio=HAIR["poisson_ratio"])
         b.add_strand(np.c_[x, np.zeros_like(x), np.full_like(x, 0.01 * i)], mat, root_director=(0.0, 0.0, 1.0))

@@ -408,7 +408,8 @@ class BendTwistConfig:
         if self.dt <= 0:
             raise ValueError(f"BendTwistConfig.dt must be > 0, got {self.dt!r}")
         if not (0 < self.planarity_threshold < 1):
-            raise ValueError(f"BendTwistConfig.planarity_threshold must lie in (0, 1), got {self.planarity_threshold!r}")
+            raise ValueError("BendTwistConfig.planarity_threshold must lie in (0, 1), "
+                             f"got {self.planarity_threshold!r}")
 
 
 @dataclass
@@ -423,6 +424,7 @@ class BendTwistResult:
     vertex_count: int
     final_speed: float          # largest vertex speed at the end [m/s]
     shapes: list = field(default_factory=list)
+    rod_speeds: np.ndarray | None = None  # largest vertex speed of each rod at the end [m/s]
 
     @property
     def phis(self) -> np.ndarray:
@@ -491,7 +493,9 @@ def run_bend_twist(curvatures, lengths, config: BendTwistConfig | None = None, p
     ratios = np.array([planarity_ratio(p) for p in shapes])
     planar = ratios < cfg.planarity_threshold
     ref = planar_reference(k, L) if reference else np.zeros(k.shape, bool)
-    return BendTwistResult(k, L, ratios, planar, ref, cfg, seconds, model.vertex_count, speed, shapes)
+    vnorm = np.sqrt(np.sum(v**2, axis=1))
+    rod_speeds = np.array([vnorm[s:s + c].max() for s, c in zip(starts, counts)])
+    return BendTwistResult(k, L, ratios, planar, ref, cfg, seconds, model.vertex_count, speed, shapes, rod_speeds)
 
 
 # --------------------------------------------------------------------------- outputs
@@ -553,9 +557,12 @@ def write_outputs(result: BendTwistResult, out_dir: str, map_count: int = 32) ->
         "gravito_bending_length_m": gravito_bending_length(),
         "config": {k: getattr(result.config, k) for k in result.config.__dataclass_fields__},
         "rods_detail": [{"curvature_per_m": float(k), "length_m": float(L), "phi_over_pi": float(k * L / math.pi),
-                         "pca_ratio": float(r), "planar": bool(p), "planar_reference": bool(q)}
-                        for k, L, r, p, q in zip(result.curvatures, result.lengths, result.ratios, result.planar,
-                                                 result.reference)],
+                         "pca_ratio": float(r), "planar": bool(p), "planar_reference": bool(q),
+                         "final_max_speed_m_per_s": float(sp)}
+                        for k, L, r, p, q, sp in zip(result.curvatures, result.lengths, result.ratios, result.planar,
+                                                     result.reference,
+                                                     result.rod_speeds if result.rod_speeds is not None
+                                                     else np.full(len(result.lengths), np.nan))],
     }
     json_path = os.path.join(out_dir, "bend_twist.json")
     with open(json_path + ".tmp", "w") as fh:
