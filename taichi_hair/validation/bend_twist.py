@@ -79,11 +79,22 @@ Simulation choices (where the paper is silent, written down):
   dynamics; gravity tilted by ``tilt`` = 0.3 rad towards +z (out of the rest plane) for the
   first ``tilt_steps`` = 100 steps, as in the paper.
 * Classifier: PCA of the vertex positions of the equilibrium; eigenvalues l1 <= l2 <= l3 of
-  the covariance; planar iff l1 / mean(l) < ``planarity_threshold`` (default 1e-3).  A
-  planar curve has l1 = 0 exactly; the threshold sits in the gap between what converged
-  planar equilibria give (below ~1e-5, round-off and unfinished decay of the seeded
-  perturbation) and what the helices of the grid give (above ~1e-2); a helix of radius r and
-  pitch p over n turns has l1/mean ~ 3 r^2 / (2 r^2 + (n p)^2 / 12) (see the tests).
+  the covariance; planar iff l1 / mean(l) < ``planarity_threshold`` (default 1e-4).  A planar
+  curve has l1 = 0 exactly.  A localised helix at the end of a long rod gives a small ratio
+  (the straight upper part dominates the covariance), so the threshold must sit well below
+  1e-3.  A helix of radius r and pitch p over n whole turns has the covariance
+  [[r^2/2, 0, 0], [0, r^2/2, -r p/(2 pi)], [0, -r p/(2 pi), (n p)^2/12]] (tests).
+  Measured on the default 8 x 8 grid (2500 steps of 0.02 s, 50 iterations,
+  ``benchmarks/results/bend_twist/bend_twist.json``): rods the reference calls planar gave
+  ratios up to 7.2e-5, non-planar ones 2.2e-4 and above, and one rod near the boundary
+  (kappa = 1 cm^-1, phi = 6.7 pi) gave 1.1e-4 (classified non-planar, the reference says
+  planar: the one disagreement of 64).  The margin is thin.  All rods but one settled (final
+  speeds below 8 mm/s); the 3.2 m rod (kappa = 0.25 cm^-1, phi = 25 pi, 120 edges of 2.6 cm)
+  still moved at 0.49 m/s after 2500 steps despite the drag, and its ratio (7.2e-5) is the
+  planar one closest to the threshold.  Candidate cause, not verified: the same
+  unconverged-ADMM motion at w0 = 25 that :mod:`taichi_hair.bench.stability` measured on
+  cantilevers.  Two runs of the default grid gave bit-identical CSVs (180 s and 270 s of
+  stepping, depending on the machine's load).
 """
 
 from __future__ import annotations
