@@ -536,6 +536,7 @@ def cmd_pareto(args, methods) -> int:
         raise CLIError("bench pareto runs its sweep in f32 and the reference in f64 itself; drop --precision")
     os.makedirs(args.out, exist_ok=True)
     t0 = time.perf_counter()
+    load_at_start = os.getloadavg()  # the machine may be shared: costs scale with its load
     quiet = args.quiet
 
     def say(text):
@@ -563,6 +564,7 @@ def cmd_pareto(args, methods) -> int:
 
     meta = {"arch": arch, "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.platform()}",
             "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+            "load_average_at_start": [round(x, 2) for x in load_at_start],
             "full": bool(args.full), "groom_strands": args.groom_strands, "scenes": infos,
             "seconds": round(time.perf_counter() - t0, 1)}
     with open(os.path.join(args.out, "pareto.json"), "w") as fh:
