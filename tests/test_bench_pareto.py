@@ -89,6 +89,22 @@ def test_shipped_pareto_data():
                 assert weakly, p
 
 
+def test_choose_from_measured_points():
+    from taichi_hair.bench.pareto import Point, choose, load_shipped
+
+    pts = [Point("s", "a", "f32", 0.01, 10, 0, 0, "", 1.0, 0.20), Point("s", "b", "f32", 0.01, 30, 0, 0, "", 3.0, 0.02),
+           Point("s", "c", "f32", 0.01, 0, 80, 0, "", 2.0, 0.05), Point("s", "d", "f32", 0.01, 0, 5, 0, "", 0.5, math.inf)]
+    assert choose(pts, "s", max_error=0.06).method == "c"    # cheapest within the error
+    assert choose(pts, "s", max_error=0.01 + 0.01).method == "b"
+    assert choose(pts, "s", max_cost=2.5).method == "c"      # most accurate within the budget (d diverged)
+    with pytest.raises(ValueError, match="reaches error"):
+        choose(pts, "s", max_error=0.001)
+    with pytest.raises(ValueError, match="exactly one"):
+        choose(pts, "s")
+    # On the shipped data, the cantilever's most accurate setting is an ADMM one (measured).
+    assert choose(load_shipped(), "cantilever", max_cost=1e9).method.startswith("admm")
+
+
 def test_cli_errors(capsys, tmp_path):
     from taichi_hair.cli import main
 

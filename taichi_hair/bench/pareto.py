@@ -455,6 +455,35 @@ def read_csv(path: str) -> list[Point]:
     return pts
 
 
+def load_shipped() -> list[Point]:
+    """The measured points shipped with the package (``data/pareto_cpu.csv``)."""
+    return read_csv(os.path.join(DATA_DIR, "pareto_cpu.csv"))
+
+
+def choose(points, scene: str, max_error: float | None = None, max_cost: float | None = None) -> Point:
+    """Pick a measured point of ``scene``: the cheapest with error <= ``max_error``, or the most accurate
+    with cost <= ``max_cost`` [wall s / simulated s / 1k vertices] (exactly one of the two).
+
+    Raises ValueError naming what cannot be met (the measured range is in the message).
+    """
+    if (max_error is None) == (max_cost is None):
+        raise ValueError("choose: give exactly one of max_error and max_cost")
+    ps = [p for p in points if p.scene == scene and math.isfinite(p.error)]
+    if not ps:
+        raise ValueError(f"choose: no measured points for scene {scene!r}")
+    if max_error is not None:
+        ok = [p for p in ps if p.error <= max_error]
+        if not ok:
+            raise ValueError(f"choose: no measured setting of scene {scene!r} reaches error {max_error:g} "
+                             f"(best measured {min(p.error for p in ps):.3g})")
+        return min(ok, key=lambda p: (p.cost, p.error))
+    ok = [p for p in ps if p.cost <= max_cost]
+    if not ok:
+        raise ValueError(f"choose: no measured setting of scene {scene!r} costs <= {max_cost:g} "
+                         f"(cheapest measured {min(p.cost for p in ps):.3g})")
+    return min(ok, key=lambda p: (p.error, p.cost))
+
+
 COLORS = {"admm": "C3", "admm_w1": "C1", "admm_f64": "C5", "shape": "C0", "xpbd": "C2"}
 
 
