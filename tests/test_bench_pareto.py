@@ -92,8 +92,10 @@ def test_shipped_pareto_data():
 def test_choose_from_measured_points():
     from taichi_hair.bench.pareto import Point, choose, load_shipped
 
-    pts = [Point("s", "a", "f32", 0.01, 10, 0, 0, "", 1.0, 0.20), Point("s", "b", "f32", 0.01, 30, 0, 0, "", 3.0, 0.02),
-           Point("s", "c", "f32", 0.01, 0, 80, 0, "", 2.0, 0.05), Point("s", "d", "f32", 0.01, 0, 5, 0, "", 0.5, math.inf)]
+    pts = [Point("s", "a", "f32", 0.01, 10, 0, 0, "", 1.0, 0.20),
+           Point("s", "b", "f32", 0.01, 30, 0, 0, "", 3.0, 0.02),
+           Point("s", "c", "f32", 0.01, 0, 80, 0, "", 2.0, 0.05),
+           Point("s", "d", "f32", 0.01, 0, 5, 0, "", 0.5, math.inf)]
     assert choose(pts, "s", max_error=0.06).method == "c"    # cheapest within the error
     assert choose(pts, "s", max_error=0.01 + 0.01).method == "b"
     assert choose(pts, "s", max_cost=2.5).method == "c"      # most accurate within the budget (d diverged)
