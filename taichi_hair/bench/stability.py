@@ -47,7 +47,9 @@ off by 3-37 % after 1 to 6 s of simulated time, the rods oscillating at 0.003-0.
 the drag (each step's ADMM solve stops short of its minimum and the leftover keeps them
 moving); with w0 = 1 the three hair-like rods settled within 2 s to 0.1-1.2 % of the elastica,
 but the E_s = 1000 E_b rod went non-finite (the Sec. 6.1 limitation: a weight set from the
-bending stiffness is far too soft for a very stiff stretch).
+bending stiffness is far too soft for a very stiff stretch).  Neither the dual warm start (off: -20 %, -15 %
+sag errors after 3 s) nor the dual frame ("pair": same as "root") is the cause; w0 = 5 settles
+to ~1 % in the same 3 s (second study in the same file).
 
 Default atlas, measured (``taichi-hair bench stability --out benchmarks/results/stability``,
 2026-11-25, 2-core shared VM, f32 CPU, 116 s; cells ok / wrong / unstable out of 36 per method):
