@@ -41,10 +41,9 @@ proximity detection; body colliders keep the velocity-grown proximity reach
 
 import taichi as ti
 
-from .grid import bucket_of, cell_in_range, entry_pair_here, segment_closest_points
+from .grid import (bucket_of, cell_in_range, contact_normal, entry_pair_here, exclusive_scan, row_holds,
+                   segment_closest_points)
 
-vec3 = ti.math.vec3
-ivec3 = ti.types.vector(3, ti.i32)
 ivec4 = ti.types.vector(4, ti.i32)
 vec4 = ti.types.vector(4, float)
 
@@ -194,11 +193,7 @@ def find_impacts(vertex: ti.template(), edge: ti.template(), x0: ti.template(), 
 
 @ti.func
 def _impact_listed(ccd: ti.template(), a: ti.i32, b: ti.i32) -> bool:
-    found = False
-    for k in range(ccd.edge_impact_count[a]):
-        if ccd.edge_impact[a, k] == b:
-            found = True
-    return found
+    return row_holds(ccd.edge_impact, ccd.edge_impact_count, a, b)
 
 
 @ti.kernel
@@ -213,13 +208,7 @@ def count_impact_contacts(ccd: ti.template(), con: ti.template()):
         ccd.edge_emit_count[a] = c
     ti.loop_config(serialize=True)
     for _ in range(1):
-        n = ccd.edge_impact_count.shape[0]
-        run = 0
-        for i in range(n):
-            c = ccd.edge_emit_count[i]
-            ccd.edge_emit_count[i] = run
-            run += c
-        ccd.edge_emit_count[n] = run
+        exclusive_scan(ccd.edge_emit_count, ccd.edge_impact_count.shape[0])
 
 
 @ti.kernel
@@ -241,14 +230,7 @@ def write_impact_contacts(x0: ti.template(), x1: ti.template(), radius: ti.templ
                     pb0 = x0[b] + tau * (x1[b] - x0[b])
                     pb1 = x0[b + 1] + tau * (x1[b + 1] - x0[b + 1])
                     s, u, dist = segment_closest_points(pa0, pa1, pb0, pb1)
-                    d = (pa0 + s * (pa1 - pa0)) - (pb0 + u * (pb1 - pb0))
-                    nrm = vec3(0.0, 1.0, 0.0)
-                    if dist > 1e-12:
-                        nrm = d / dist
-                    else:
-                        cr = (pa1 - pa0).cross(pb1 - pb0)
-                        if cr.norm() > 1e-12:
-                            nrm = cr.normalized()
+                    nrm = contact_normal((pa0 + s * (pa1 - pa0)) - (pb0 + u * (pb1 - pb0)), pa1 - pa0, pb1 - pb0)
                     # Begin-of-step separation of the same material points: its tangential part is
                     # removed so u_T measures the slip since the beginning of the step.
                     d0 = (x0[a] + s * (x0[a + 1] - x0[a])) - (x0[b] + u * (x0[b + 1] - x0[b]))

@@ -332,7 +332,9 @@ def cmd_simulate(args) -> int:
                    compile_seconds=t_compile, ms_per_frame=1e3 * wall / max(run_frames, 1), iterations=iters,
                    substeps=scene.substeps,
                    mvertex_iterations_per_s=n * iters * scene.substeps * run_frames / max(wall, 1e-9) / 1e6,
-                   peak_host_memory_mb=peak_mb, diverged=diverged)
+                   peak_host_memory_mb=peak_mb, diverged=diverged,
+                   load_average_1min_at_end=os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+                   cpu_count=os.cpu_count())
     if with_contacts and stats_rows:
         summary["mean_contacts"] = float(np.mean([r["contacts"] for r in stats_rows]))
         summary["max_penetration_m"] = float(max(r["max_penetration_m"] for r in stats_rows))

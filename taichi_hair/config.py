@@ -7,7 +7,7 @@ impossible parameters fail early with a message naming the field.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 
 def _check_positive(owner: str, name: str, value: float) -> None:
@@ -111,6 +111,21 @@ class ContactConfig:
             (10 in the paper's hairball; 0 disables it) [-].
         capacity_per_vertex: initial contact buffer size per vertex; grown
             (doubled, and the detection redone) when a step overflows it [-].
+        relinearize_correction: re-linearise the contacts at the current
+            positions before the geometric correction (closest points and
+            normals at x, kept on the begin-of-step side; body distance at x),
+            so pairs that slid apart are not pulled back onto a stale plane
+            (``contacts.relinearize_contacts``; the paper keeps the
+            begin-of-step linearisation, which measured up to 75 % edge stretch
+            on the hairball's impact) [-].
+        mass_splitting: how many virtual copies of a vertex the Delassus
+            diagonal D_hat uses (Sec. 4.5 "Hybrid contact solve"): ``"vertex"``
+            splits each vertex among all its contacts n_i (the paper's D_hat);
+            ``"batch"`` (default) among its contacts in the same batch only,
+            since only those are updated together by the Jacobi step (batches
+            follow one another Gauss-Seidel style).  Both have the same fixed
+            point; ``"batch"`` converges faster where vertices have many
+            contacts (measured on the hairball, ``BENCHMARKS.md``).
         continuous_detections: continuous-time detections per step (Sec. 4.5:
             ACCD, the two earliest impacts per edge), run at regular
             intervals of the ADMM iterations (the paper's "CT" hairball uses
@@ -135,6 +150,8 @@ class ContactConfig:
     correction_iterations: int = 10
     capacity_per_vertex: float = 3.0
     continuous_detections: int = 0
+    mass_splitting: str = "batch"
+    relinearize_correction: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):
@@ -148,6 +165,8 @@ class ContactConfig:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= lo):
                 raise ValueError(f"ContactConfig.{name} must be an integer >= {lo}, got {v!r}")
+        if self.mass_splitting not in ("batch", "vertex"):
+            raise ValueError(f"ContactConfig.mass_splitting must be 'batch' or 'vertex', got {self.mass_splitting!r}")
         if not (math.isfinite(self.capacity_per_vertex) and self.capacity_per_vertex > 0):
             raise ValueError(f"ContactConfig.capacity_per_vertex must be > 0, got {self.capacity_per_vertex!r}")
 

@@ -21,7 +21,8 @@ Then the vertex-to-contact adjacency (CSR, each list sorted so the projection
 sums in a fixed order: bitwise determinism), the collision weights
 W_z,i = m_i / dt~_i^2 on vertices with contacts (zero elsewhere; dt~ of
 Sec. 4.5 from dimensional analysis, per strand), and the mass-split Delassus
-diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i.
+diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i (n_i: the contacts of vertex i, or by default only those in
+c's batch, ``ContactConfig.mass_splitting``).
 
 Emission writes contact c only when c < capacity; the count is always exact,
 so the caller detects an overflow, grows the buffers and detects again: no
@@ -31,7 +32,8 @@ contact is ever dropped silently.
 import taichi as ti
 
 from .colliders import acts_on, body_transform, collider_distance
-from .grid import segment_closest_points
+from .grid import contact_normal, row_holds, segment_closest_points
+from .projection import BATCHES
 
 vec3 = ti.math.vec3
 ivec4 = ti.types.vector(4, ti.i32)
@@ -40,11 +42,7 @@ vec4 = ti.types.vector(4, float)
 
 @ti.func
 def _in_list(grid: ti.template(), a: ti.i32, b: ti.i32) -> bool:
-    found = False
-    for k in range(grid.edge_candidate_count[a]):
-        if grid.edge_candidate[a, k] == b:
-            found = True
-    return found
+    return row_holds(grid.edge_candidate, grid.edge_candidate_count, a, b)
 
 
 @ti.func
@@ -107,7 +105,7 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
                     s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
                     pa = x[a] + s * (x[a + 1] - x[a])
                     pb = x[b] + t * (x[b + 1] - x[b])
-                    nrm = _contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
+                    nrm = contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
                     r = radius[a] + radius[b]
                     con.contact_vertex[c] = ivec4(a, a + 1, b, b + 1)
                     con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
@@ -138,23 +136,76 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
 
 
 @ti.func
-def _contact_normal(d, ea, eb):
-    """Unit normal from the separation d; for touching centrelines, the common normal of the edges."""
-    nrm = vec3(0.0, 1.0, 0.0)
-    dn = d.norm()
-    if dn > 1e-12:
-        nrm = d / dn
-    else:
-        cr = ea.cross(eb)
-        if cr.norm() > 1e-12:
-            nrm = cr.normalized()
-    return nrm
+def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> float:
+    """Mass-split Delassus diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i of contact c (Sec. 4.5)."""
+    dh = 0.0
+    for k in ti.static(range(4)):
+        v = con.contact_vertex[c][k]
+        if v >= 0:
+            h = con.contact_weight[c][k]
+            # Virtual copies of vertex v: all its contacts (the paper's n_i), or only those of c's
+            # batch, the ones updated at the same time as c (see ContactConfig.mass_splitting).
+            copies = con.vertex_contact_count[v]
+            if ti.static(split_by_batch):
+                copies = 0
+                for e in range(con.vertex_contact_start[v], con.vertex_contact_start[v + 1]):
+                    if con.vertex_contact_list[e] % BATCHES == c % BATCHES:
+                        copies += 1
+            dh += copies * h * h * con.vertex_contact_inv_weight[v]
+    return dh
+
+
+@ti.kernel
+def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.template(), cs: ti.template(),
+                         con: ti.template(), split_by_batch: ti.template()):
+    """Re-linearise every contact at the current x, before the geometric correction.
+
+    Contacts are linearised at the beginning of the step (closest points, normal, body tangent plane).
+    When hair slides by centimetres in a step, the frozen plane of a pair that has moved apart can be
+    "violated" by millimetres although the two edges are millimetres away from each other (measured on
+    the hairball), and projecting x onto it stretches edges by tens of percent.  Here each hair-hair contact
+    takes the closest points of its two edges at x, with the normal of their separation, kept on the side
+    of the begin-of-step normal (a pair that crossed is pushed back, not through); each body contact takes
+    the collider's distance and normal at x.  The tangential part still measures the slip since the
+    beginning of the step (x^t for hair pairs, the begin-of-step body point carried by the body).
+    """
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for c in range(nc):
+        vtx = con.contact_vertex[c]
+        n_old = con.contact_normal[c]
+        k = con.contact_collider[c]
+        if k < 0:
+            a = vtx[0]
+            b = vtx[2]
+            s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+            d = (x[a] + s * (x[a + 1] - x[a])) - (x[b] + t * (x[b + 1] - x[b]))
+            nrm = n_old
+            if d.dot(n_old) > 0.0 and dist > 1e-12:
+                nrm = d / dist
+            d0 = (x0[a] + s * (x0[a + 1] - x0[a])) - (x0[b] + t * (x0[b + 1] - x0[b]))
+            con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
+            con.contact_normal[c] = nrm
+            con.contact_kinematic[c] = -(radius[a] + radius[b]) * nrm - (d0 - d0.dot(nrm) * nrm)
+        else:
+            i = vtx[0]
+            R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+            q = R.transpose() @ (x[i] - T)
+            dq, nq = collider_distance(cs, k, q)
+            nrm = R @ nq
+            surf = x[i] - dq * nrm
+            # Old u_kin = -s_end - r n_end: recover the body point s_end carried from the beginning.
+            s_end = -con.contact_kinematic[c] - radius[i] * n_old
+            ref = nrm.dot(surf) * nrm + (s_end - nrm.dot(s_end) * nrm)
+            con.contact_normal[c] = nrm
+            con.contact_kinematic[c] = -ref - radius[i] * nrm
+    for c in range(nc):
+        con.contact_delassus[c] = _delassus(con, c, split_by_batch)
 
 
 @ti.kernel
 def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_base: ti.template(),
                     vertex_typical_length: ti.template(), vertex_dt_bend: ti.template(), dt: float,
-                    gravity_norm: float, dynamic: ti.template(), first_new: ti.i32):
+                    gravity_norm: float, dynamic: ti.template(), first_new: ti.i32, split_by_batch: ti.template()):
     """CSR vertex -> contacts (sorted), W_z (Sec. 4.5 "Collision constraint weights"), D_hat.
 
     Contacts from ``first_new`` on start from zero; with ``first_new`` = 0 (the proximity detection at the
@@ -215,12 +266,7 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
         if first_new == 0:
             con.vertex_contact_dual[i] = vec3(0.0)
     for c in range(nc):
-        dh = 0.0
-        for k in ti.static(range(4)):
-            v = con.contact_vertex[c][k]
-            if v >= 0:
-                h = con.contact_weight[c][k]
-                dh += con.vertex_contact_count[v] * h * h * con.vertex_contact_inv_weight[v]
+        dh = _delassus(con, c, split_by_batch)
         if c < first_new:
             old = con.contact_delassus[c]
             if old > 0.0:
@@ -363,7 +409,7 @@ class ContactPipeline:
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
         build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                        dt, gn, dynamic, 0)
+                        dt, gn, dynamic, 0, cfg.mass_splitting == "batch")
         self.detections += 1
         self.margin_used = margin
         self.proximity_contacts = total
@@ -406,7 +452,7 @@ class ContactPipeline:
         added = total - first
         if added > 0:
             build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                            self._dt, self._gn, self._dynamic, first)
+                            self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == "batch")
         self.continuous_contacts += added
         return added
 
@@ -465,10 +511,14 @@ class ContactPipeline:
             projection_sweep(self.con)
         projection_end(x, self.con, buf, False)
 
-    def correct(self, x, sweeps: int) -> None:
-        """Optional geometric contact correction at the end of the step: project x itself."""
+    def correct(self, x, x0, sweeps: int) -> None:
+        """Optional geometric contact correction at the end of the step: project x itself (contacts
+        re-linearised at x first unless ``ContactConfig.relinearize_correction`` is off; x0: x^t)."""
         from .projection import projection_begin, projection_end, projection_sweep
 
+        if self.config.relinearize_correction:
+            relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con,
+                                 self.config.mass_splitting == "batch")
         projection_begin(x, self.con, True)
         for _ in range(sweeps):
             projection_sweep(self.con)

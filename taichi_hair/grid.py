@@ -99,6 +99,42 @@ def segment_closest_points(p0, p1, q0, q1):
 
 
 @ti.func
+def contact_normal(d, ea, eb):
+    """Unit normal from the separation d of two edges' closest points; for touching centrelines, the
+    common normal of the edges ea x eb (any unit vector if they are also parallel)."""
+    nrm = vec3(0.0, 1.0, 0.0)
+    dn = d.norm()
+    if dn > 1e-12:
+        nrm = d / dn
+    else:
+        cr = ea.cross(eb)
+        if cr.norm() > 1e-12:
+            nrm = cr.normalized()
+    return nrm
+
+
+@ti.func
+def row_holds(table: ti.template(), count: ti.template(), a: ti.i32, b: ti.i32) -> bool:
+    """Does row a of a per-edge list ``table[a, k]`` (``count[a]`` entries) hold b?"""
+    found = False
+    for k in range(count[a]):
+        if table[a, k] == b:
+            found = True
+    return found
+
+
+@ti.func
+def exclusive_scan(a: ti.template(), n: ti.i32):
+    """a[0:n] <- its exclusive prefix sum, a[n] <- the total (serial: call from a serialised loop)."""
+    run = 0
+    for i in range(n):
+        c = a[i]
+        a[i] = run
+        run += c
+    a[n] = run
+
+
+@ti.func
 def cell_of(p, h: float):
     return ti.Vector([ti.cast(ti.floor(p[0] / h), ti.i32), ti.cast(ti.floor(p[1] / h), ti.i32),
                       ti.cast(ti.floor(p[2] / h), ti.i32)])
@@ -160,13 +196,7 @@ def count_cells(edge: ti.template(), boxes: ti.template(), h: float):
         boxes.edge_entry_start[i] = cnt
     ti.loop_config(serialize=True)
     for _ in range(1):
-        n = boxes.edge_cell_lo.shape[0]
-        run = 0
-        for i in range(n):
-            c = boxes.edge_entry_start[i]
-            boxes.edge_entry_start[i] = run
-            run += c
-        boxes.edge_entry_start[n] = run
+        exclusive_scan(boxes.edge_entry_start, boxes.edge_cell_lo.shape[0])
 
 
 @ti.func

@@ -250,7 +250,7 @@ class SolverADMM(StageTimer):
                 # "Repeat continuous-collision detection and feasible projection on x" (Alg. 1, end).
                 con.detect_continuous(b.vertex_position_begin, state.vertex_position)
                 t0 = self._tock("continuous", t0)
-            con.correct(state.vertex_position, con.config.correction_iterations)
+            con.correct(state.vertex_position, b.vertex_position_begin, con.config.correction_iterations)
             update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
                                     state.edge_twist, state)
             t0 = self._tock("correction", t0)

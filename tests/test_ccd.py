@@ -7,6 +7,8 @@ import taichi as ti
 from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
 from taichi_hair.config import ContactConfig
 
+from geometry import segment_distance
+
 
 def line(p0, p1, n):
     return np.linspace(np.asarray(p0, float), np.asarray(p1, float), n)
@@ -48,20 +50,6 @@ def test_accd_time_of_impact_of_crossing_segments():
     toi, _ = _accd((-1e-3, 0, 0), (1e-3, 0, 0), (0, d0, -1e-3), (0, d0, 1e-3),
                    (0, -1, 0), (0, -1, 0), (0, -1, 0), (0, -1, 0), xi)
     assert toi > 1.0
-
-
-def _segment_distance(p0, p1, q0, q1):
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a, e, f = d1 @ d1, d2 @ d2, d2 @ r
-    c, b = d1 @ r, d1 @ d2
-    den = a * e - b * b
-    s = np.clip((b * f - c * e) / den, 0, 1) if den > 1e-12 * a * e else 0.0
-    t = (b * s + f) / e
-    if t < 0:
-        t, s = 0.0, np.clip(-c / a, 0, 1)
-    elif t > 1:
-        t, s = 1.0, np.clip((b - c) / a, 0, 1)
-    return np.linalg.norm(p0 + s * d1 - q0 - t * d2)
 
 
 def test_continuous_detection_finds_every_closing_pair_a_brute_force_finds():
@@ -106,7 +94,7 @@ def test_continuous_detection_finds_every_closing_pair_a_brute_force_finds():
         for bb in edges[i + 1:]:
             if (strand_of[a] == strand_of[bb] and bb - a <= 1) or (a, bb) in prox:
                 continue
-            dmin = min(_segment_distance(*(x0[[a, a + 1, bb, bb + 1]] + t * disp[[a, a + 1, bb, bb + 1]]))
+            dmin = min(segment_distance(*(x0[[a, a + 1, bb, bb + 1]] + t * disp[[a, a + 1, bb, bb + 1]]))
                        for t in ts)
             if dmin < 0.9 * thick:
                 closing.add((a, bb))
