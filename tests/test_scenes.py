@@ -46,6 +46,7 @@ def test_shipped_scenes_parse():
     assert pony.groom.strand_count == 255 and pony.groom.vertex_count == 255 * 16  # tail.tfx
     assert 0.15 < np.median(pony.groom.lengths()) < 0.4  # metres after scale = 0.0035
     assert len(pony.colliders) == 3
+    assert pony.solver_config.contacts is not None and pony.solver_config.contacts.hair_hair
     ball = load_scene(os.path.join(SCENES, "hairball.toml"), {"strands": 7, "frames": 3, "iterations": 4})
     assert ball.groom.strand_count == 7 and ball.frames == 3 and ball.solver_config.iterations == 4
     assert np.allclose(np.linalg.norm(ball.groom.points[ball.groom.strand_offsets[:-1]], axis=1), 0.0905,
