@@ -26,11 +26,12 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import sys
 import time
 
 import numpy as np
+
+from machine_info import machine  # benchmarks/machine_info.py (the script folder is on sys.path)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
@@ -49,24 +50,6 @@ def groom(th, strands, vertices):
     scene = HangScene(strands=strands, length=length, edge_length=length / (vertices - 1),
                       curl_radius=0.004 if wavy else 0.002, curl_pitch=0.03 if wavy else 0.06)
     return scene, build_hang(scene)
-
-
-def machine() -> dict:
-    info = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-            "cpu_count": os.cpu_count(), "python": platform.python_version()}
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    info["cpu_model"] = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    try:
-        info["load_average_1min"] = os.getloadavg()[0]
-    except OSError:
-        pass
-    return info
 
 
 def bench_size(th, ti, strands, vertices, methods, steps):

@@ -23,11 +23,12 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import sys
 import time
 
 import numpy as np
+
+from machine_info import machine  # benchmarks/machine_info.py (the script folder is on sys.path)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
@@ -41,24 +42,6 @@ def groom(strands, vertices):
     length = 0.2
     scene = HangScene(strands=strands, length=length, edge_length=length / (vertices - 1))
     return scene, build_hang(scene)
-
-
-def machine() -> dict:
-    info = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-            "cpu_count": os.cpu_count(), "python": platform.python_version()}
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    info["cpu_model"] = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    try:
-        info["load_average_1min"] = os.getloadavg()[0]
-    except OSError:
-        pass
-    return info
 
 
 def bench(ti, strands, vertices, settings, steps, schedules):

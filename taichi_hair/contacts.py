@@ -306,7 +306,7 @@ class ContactPipeline:
 
     def __init__(self, model, config, colliders=None):
         from .colliders import ColliderSet
-        from .fields import BoxGridFields, ContactFields, GridFields
+        from .fields import BoxGridFields, CCDFields, ContactFields, GridFields
 
         self.model = model
         self.config = config
@@ -330,10 +330,10 @@ class ContactPipeline:
         capacity = max(16, int(config.capacity_per_vertex * n))
         self.con = ContactFields(capacity, n)
         self.stats_out = ti.field(float, 4)
-        #: Continuous-time detection buffers, allocated on first use (``continuous_detections`` > 0).
-        self.ccd = None
+        #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
+        #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
+        self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
         self.ccd_skipped = 0
-        self.proximity_contacts = 0
         self.continuous_contacts = 0
         self.capped_queries = 0
         self.grow_events = 0
@@ -424,10 +424,10 @@ class ContactPipeline:
         build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                         dt, gn, dynamic, 0, cfg.mass_splitting == "batch")
         self.detections += 1
-        self.margin_used = margin
-        self.proximity_contacts = total
+        # Per-step statistics of the continuous passes of this step.
         self.continuous_contacts = 0
         self.capped_queries = 0
+        self.ccd_skipped = 0
         self._dt, self._gn, self._dynamic = dt, gn, dynamic
         return total
 
@@ -556,4 +556,5 @@ class ContactPipeline:
         o = self.stats_out.to_numpy()
         return {"contacts": self.contact_count, "sticking": int(o[0]), "sliding": int(o[1]),
                 "separating": int(o[2]), "max_penetration_m": max(float(o[3]), 0.0),
-                "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries}
+                "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
+                "continuous_passes_skipped": self.ccd_skipped}

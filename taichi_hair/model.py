@@ -39,10 +39,7 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
         EdgeInfo.__init__(self, n)
         PairInfo.__init__(self, n)
         StrandInfo.__init__(self, ns)
-        for name, value in host.items():
-            field = getattr(self, name, None)
-            if isinstance(field, ti.Field):
-                field.from_numpy(np.ascontiguousarray(value, dtype=_np_dtype(field)))
+        self._upload(host)
         #: Identity body transforms, used to build the rest state.
         self._rest_rotation = ti.Matrix.field(3, 3, float, body_count)
         self._rest_rotation.from_numpy(np.tile(np.eye(3), (body_count, 1, 1)).astype(_np_float()))
@@ -64,13 +61,17 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
                                  "(vertex and strand counts) must stay the same for an in-place update")
         if materials is not None and len(materials) != self.strand_count:
             raise ValueError(f"Model.update: {len(materials)} materials for {self.strand_count} strands")
+        self._upload(host)
+        self.host = host
+        if materials is not None:
+            self.materials = materials
+
+    def _upload(self, host: dict) -> None:
+        """Copy every host array that has a field of the same name into that field."""
         for name, value in host.items():
             field = getattr(self, name, None)
             if isinstance(field, ti.Field):
                 field.from_numpy(np.ascontiguousarray(value, dtype=_np_dtype(field)))
-        self.host = host
-        if materials is not None:
-            self.materials = materials
 
     def reset_state(self, state: State) -> None:
         """Put ``state`` (allocated by :meth:`state`) back at rest, in place (no new fields)."""
@@ -87,11 +88,7 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
     def state(self) -> State:
         """A new State at rest: input positions, zero velocities, rest twists and frames."""
         s = State(self.vertex_count)
-        s.vertex_position.copy_from(self.vertex_rest_position)
-        s.edge_twist.copy_from(self.edge_rest_twist)
-        s.edge_tangent.from_numpy(self.host["edge_rest_tangent"].astype(_np_float()))
-        s.edge_reference_director.copy_from(self.edge_rest_director)
-        update_reference_frames(True, self, self, self, self, self._rest_rotation, s.vertex_position, s.edge_twist, s)
+        self.reset_state(s)
         return s
 
     def control(self) -> Control:

@@ -87,6 +87,8 @@ class SolverADMM(StageTimer):
         self._bad = ti.field(ti.i32, ())
         self._diag_kappa = ti.Vector.field(3, float, model.vertex_count)
         self._diag_strain = ti.field(float, model.vertex_count)
+        #: The rest State, refilled in place by ``_set_coefficients`` (rest strains).
+        self._rest_state = model.state()
         self._set_coefficients()
         arch = ti.lang.impl.current_cfg().arch
         gpu = arch in _GPU_ARCHS
@@ -156,10 +158,7 @@ class SolverADMM(StageTimer):
         self.buf.pair_admm_weight.from_numpy(weight.astype(f))
         self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
         self.host_pair_voronoi_bend = vstar
-        if getattr(self, "_rest_state", None) is None:
-            self._rest_state = m.state()
-        else:
-            m.reset_state(self._rest_state)
+        m.reset_state(self._rest_state)
         rest = self._rest_state
         admm.compute_strains(self.measure, m, m, rest.vertex_position, rest.edge_twist, rest,
                              self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
