@@ -54,21 +54,24 @@ def groom(th, strands, vertices):
 
 def bench_size(th, ti, strands, vertices, methods, steps):
     from taichi_hair.scenes import nod_rotation
-    from taichi_hair.solver_shape import ShapeRegion, ShapeSphereCollider, SolverShape, SolverShapeConfig
+    from taichi_hair.colliders import SphereCollider
+    from taichi_hair.solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
 
     scene, model = groom(th, strands, vertices)
     length_its, local_its = TABLE2_ITERATIONS.get(vertices, (3, 4))
     region = ShapeRegion(global_stiffness=0.2, global_range=0.3, local_stiffness=0.8, local_iterations=local_its,
                          length_iterations=length_its, damping=0.05)
-    colliders = (ShapeSphereCollider((0.0, 0.0, 0.0), scene.sphere_radius, body=0),
-                 ShapeSphereCollider((0.15, -0.3, 0.0), 0.08), ShapeSphereCollider((-0.15, -0.3, 0.0), 0.08))
+    # Frictionless, as the paper's Sec. 3.5 projection.
+    colliders = [SphereCollider((0.0, 0.0, 0.0), scene.sphere_radius, friction=0.0, body=0),
+                 SphereCollider((0.15, -0.3, 0.0), 0.08, friction=0.0),
+                 SphereCollider((-0.15, -0.3, 0.0), 0.08, friction=0.0)]
     rows = []
     finals = {}
     state, control = model.state(), model.control()
     snapshot = state.to_numpy()
     for method in methods:
         state.load(snapshot)
-        solver = SolverShape(model, SolverShapeConfig(method=method, regions=(region,), colliders=colliders))
+        solver = SolverShape(model, SolverShapeConfig(method=method, regions=(region,)), colliders=colliders)
         t = 0.0
 
         def step():

@@ -30,7 +30,7 @@ from .errors import SimulationDivergedError
 from .colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
 from .solver_xpbd import SolverXPBD, SolverXPBDConfig
 from .grooming import GroomingConfig, GroomingSession
-from .solver_shape import ShapeCapsuleCollider, ShapeRegion, ShapeSphereCollider, SolverShape, SolverShapeConfig
+from .solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
 from .skinning import SkinningConfig, SkinningLBS, build_guides, compute_binding, error_colors, \
     interpolation_error, select_guides
 
@@ -56,8 +56,6 @@ __all__ = [
     "GroomingSession",
     "SolverShapeConfig",
     "ShapeRegion",
-    "ShapeSphereCollider",
-    "ShapeCapsuleCollider",
     "SkinningConfig",
     "SkinningLBS",
     "build_guides",

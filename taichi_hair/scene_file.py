@@ -403,7 +403,7 @@ class Scene:
         if self.solver == "shape":
             from .solver_shape import SolverShape
 
-            return SolverShape(model, self.solver_config, profile=profile)
+            return SolverShape(model, self.solver_config, profile=profile, colliders=self.colliders or None)
         from .solver_xpbd import SolverXPBD
 
         return SolverXPBD(model, self.solver_config)
@@ -671,12 +671,7 @@ def _solver(t: _Table, overrides: dict, colliders: list):
         rt = _Table(t.path, f"{t.name}.region", region)
         reg = _dataclass_from(rt, ShapeRegion, rt.rest(), "ShapeRegion")
         desc["region"] = region
-        for k, c in enumerate(colliders):
-            if not hasattr(c, "radius") or hasattr(c, "mesh"):
-                raise SceneError(f"{t.path}: [[colliders]] {k}: solver type \"shape\" takes spheres and capsules "
-                                 f"only, got {type(c).__name__}")
-        cfg = _dataclass_from(t, SolverShapeConfig, dict(values, regions=(reg,), colliders=tuple(colliders)),
-                              "SolverShapeConfig")
+        cfg = _dataclass_from(t, SolverShapeConfig, dict(values, regions=(reg,)), "SolverShapeConfig")
     else:
         for k in ("contacts", "region"):
             if t.has(k):

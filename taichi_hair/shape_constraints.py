@@ -10,7 +10,9 @@ One stage per kernel, in the order of the paper's Algorithm 1; the math lives in
 * :func:`global_stiffness_at` -- the root-to-tip ramp of S_G (Sec. 3.3);
 * :func:`local_shape_correction` -- the two-vertex update of Eq. 4;
 * :func:`edge_length_correction` -- the PBD distance constraint [MHHR07];
-* :func:`project_out_of_sphere`, :func:`project_out_of_capsule` -- Sec. 3.5.
+* :func:`project_out_of_collider` -- Sec. 3.5, against any collider of
+  :mod:`taichi_hair.colliders` (plane, sphere, capsule, mesh SDF), with an
+  optional position-based Coulomb friction.
 
 Kernel arguments follow the package convention: ``model`` (static groom data),
 ``solver`` (the :class:`SolverShape`, holding its own fields), control inputs,
@@ -25,12 +27,10 @@ position of vertex i is ``^{i-1}P_i^0 = R_{i-1}^{0 T} (P_i^0 - P_{i-1}^0)``.
 
 import taichi as ti
 
+from .colliders import acts_on, body_transform, collider_distance
+
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
-
-#: Collider kinds stored in ``solver.collider_kind``.
-COLLIDER_SPHERE = 0
-COLLIDER_CAPSULE = 1
 
 
 # =========================================================================== quaternion math
@@ -184,31 +184,43 @@ def edge_length_correction(x_a: vec3, x_b: vec3, rest_length: float, w_a: float,
 
 
 @ti.func
-def project_out_of_sphere(p: vec3, center: vec3, radius: float) -> vec3:
-    """Closest point on the sphere's surface if p is inside, else p (Sec. 3.5).
+def project_out_of_collider(cs: ti.template(), c: ti.i32, p: vec3, p_begin: vec3, radius: float) -> vec3:
+    """Sec. 3.5 against collider ``c`` of the :class:`~taichi_hair.colliders.ColliderSet` ``cs``.
 
-    A point exactly at the centre is pushed along +y (any direction is a closest point).
+    ``p`` is the vertex after the constraints, ``p_begin`` the same vertex at the beginning of the step
+    (x^t), ``radius`` the hair radius [m].  If the signed distance d of ``p`` to the collider (at the
+    end-of-step body transform) is below ``radius``, ``p`` moves by ``radius - d`` along the collider's
+    outward normal (the distance gradient), so the hair's surface touches the collider's, as in
+    SolverADMM's body contacts.  With a friction coefficient mu > 0, the displacement of the vertex
+    over the step relative to the collider (both in the body frame: ``p`` at the end transform,
+    ``p_begin`` at the begin transform) loses its tangential part up to mu times the normal correction
+    (position-based Coulomb friction, Mueller et al. 2007 / Macklin et al. 2014: sticking when the
+    tangential displacement is within mu * depth, sliding with that much taken off otherwise).  The
+    distance is evaluated once more after that and a remaining penetration is projected out along the
+    normal (no friction): friction's tangential move can re-enter a concave surface, and on a mesh
+    SDF one step along the trilinear gradient is only first-order.  Points outside a mesh's SDF grid
+    are far from it (``colliders.FAR``) and never move.
     """
-    d = p - center
-    dist = d.norm()
+    R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[c])
+    q = R.transpose() @ (p - T)
+    d, n = collider_distance(cs, c, q)
     out = p
-    if dist < radius:
-        n = vec3(0.0, 1.0, 0.0)
-        if dist > 1e-12:
-            n = d / dist
-        out = center + radius * n
+    if d < radius:
+        depth = radius - d
+        q = q + depth * n
+        mu = cs.collider_friction[c]
+        if mu > 0.0:
+            Rb, Tb = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[c])
+            dq = q - Rb.transpose() @ (p_begin - Tb)
+            tangential = dq - dq.dot(n) * n
+            tn = tangential.norm()
+            if tn > 1e-12:
+                q = q - ti.min(1.0, mu * depth / tn) * tangential
+        d2, n2 = collider_distance(cs, c, q)
+        if d2 < radius:
+            q = q + (radius - d2) * n2
+        out = R @ q + T
     return out
-
-
-@ti.func
-def project_out_of_capsule(p: vec3, a: vec3, b: vec3, radius: float) -> vec3:
-    """Closest point on the capsule's surface (segment a-b swept by ``radius``) if p is inside, else p."""
-    ab = b - a
-    t = 0.0
-    len2 = ab.norm_sqr()
-    if len2 > 0.0:
-        t = ti.math.clamp((p - a).dot(ab) / len2, 0.0, 1.0)
-    return project_out_of_sphere(p, a + t * ab, radius)
 
 
 @ti.func
@@ -468,33 +480,21 @@ def solve_edge_lengths_batch(model: ti.template(), solver: ti.template(), parity
 
 
 @ti.kernel
-def project_collisions(
-    model: ti.template(),
-    solver: ti.template(),
-    body_rotation: ti.template(),
-    body_translation: ti.template(),
-    collider_count: ti.i32,
-    x: ti.template(),
-):
-    """Sec. 3.5: move a free vertex inside a sphere or capsule to the closest surface point.
+def project_collisions(model: ti.template(), solver: ti.template(), cs: ti.template(), x: ti.template()):
+    """Sec. 3.5: project every free vertex out of the colliders that act on its strand.
 
-    Collider points are stored in their body's frame (world if body = -1) and follow the body's
-    transform at the end of the step.  Colliders are visited in order, once each.
+    Colliders are visited in order, once each (Gauss-Seidel over colliders): a vertex caught
+    between two colliders ends outside the last one.  ``cs`` holds the body transforms of the
+    step (:meth:`ColliderSet.begin_step`); colliders follow the end-of-step transform.
     """
     for i in x:
         if model.vertex_is_fixed[i] == 0:
+            s = model.vertex_strand[i]
             p = x[i]
-            for c in range(collider_count):
-                a = solver.collider_point_a[c]
-                b = solver.collider_point_b[c]
-                body = solver.collider_body[c]
-                if body >= 0:
-                    a = body_rotation[body] @ a + body_translation[body]
-                    b = body_rotation[body] @ b + body_translation[body]
-                if solver.collider_kind[c] == COLLIDER_SPHERE:
-                    p = project_out_of_sphere(p, a, solver.collider_radius[c])
-                else:
-                    p = project_out_of_capsule(p, a, b, solver.collider_radius[c])
+            for c in range(cs.count_field[None]):
+                if acts_on(cs, c, s):
+                    p = project_out_of_collider(cs, c, p, solver.vertex_position_begin[i],
+                                                solver.vertex_collision_radius[i])
             x[i] = p
 
 

@@ -12,7 +12,8 @@ Per step (the paper's Algorithm 1; kernels in :mod:`taichi_hair.shape_constraint
    ``update_global_transforms_jacobi`` (Algorithm 4, Jacobi, parallel per vertex),
    Method 3 ``apply_local_shape_constraints_batch(use_rest=True)`` (Algorithm 5, rest transforms)
 5. edge length constraints, iterated         -- ``solve_edge_lengths_batch`` [MHHR07]
-6. collision handling                        -- ``project_collisions`` (Sec. 3.5, spheres and capsules)
+6. collision handling                        -- ``project_collisions`` (Sec. 3.5), against the colliders of
+   :mod:`taichi_hair.colliders` (planes, spheres, capsules, mesh SDFs), the ones SolverADMM uses
 7. v = (x - x^t)/dt, finiteness check        -- ``end_step``, ``find_non_finite``
 
 Choices where the paper is silent (each is also stated where it is implemented):
@@ -39,6 +40,22 @@ Choices where the paper is silent (each is also stated where it is implemented):
   frame is the rest frame turned by the shortest arc onto the current root edge, and their "head"
   rotation (for Method 3 and Method 2's first transforms) the same arc at the start of the step.
 * Frame 0's y axis is the model's ``strand_root_director`` (the paper's "arbitrary vector").
+* Collisions (Sec. 3.5 only says a vertex inside a collider moves to its surface): a free vertex
+  whose signed distance d to a collider is below its strand's hair radius ``RodMaterial.radius``
+  (read at construction) moves by ``radius - d`` along the collider's distance gradient, so the
+  hair's surface touches the body, as in SolverADMM's body contacts.  Colliders follow their body's
+  end-of-step transform (``control``), like the roots.  The collider's ``strands`` range (collision
+  groups) is honoured.
+* Friction, which the paper leaves out of this step: each collider's Coulomb coefficient mu is
+  applied as position-based friction (PBD, Mueller et al. 2007; Macklin et al. 2014): the vertex's
+  displacement over the step relative to the collider (body frame, begin- and end-of-step body
+  transforms) loses its tangential part up to mu times the normal correction.  ``friction = 0``
+  gives the paper's frictionless projection (the colliders' default is 0.3).  A vertex resting on
+  a slope is pushed in by g cos(slope) dt^2 per step, so it holds while tan(slope) < mu and slides
+  with acceleration g (sin - mu cos) otherwise, as in Coulomb's law (tested).  The first step after
+  construction, :meth:`set_colliders` or :meth:`reset_collider_motion` sees no body motion.
+  After the friction move the distance is evaluated again and any remaining penetration projected
+  out along the normal (a concave surface, or the first-order step on a mesh SDF).
 * Regions: each strand has a region id; a region has its own S_G, range, falloff, S_L, iteration
   counts and damping.  Methods 2 and 3 launch the largest iteration count and skip the strands
   whose region has fewer.
@@ -57,8 +74,10 @@ Behaviour worth knowing (measured in tests/test_solver_shape.py and benchmarks/b
   iterations, S_G = 0.2 over 30 %) the mean edge stretch after 1 s was 243 % at dt = 1/60 s, 39 %
   with 30 length iterations, and 6.8 % with 4 substeps of 1/240 s (g dt^2 is then 16 times
   smaller).  Substepping, or more length iterations, is the remedy within the paper's scheme.
-* Collision projection is the last stage (as in Algorithm 1): after it no free vertex is inside a
-  collider, but edge lengths may be violated by the projection; there is no friction.
+* Collision projection is the last stage (as in Algorithm 1): after it no free vertex is closer
+  than a hair radius to an analytic collider (to a mesh: within the SDF's interpolation error, a
+  fraction of a voxel), but edge lengths may be violated by the projection, and edges between two
+  outside vertices may still cut a thin collider (vertex-based, as in TressFX).
 
 The step allocates nothing: all fields are created in ``__init__``.
 """
@@ -92,16 +111,6 @@ def _check_unit_interval(owner: str, name: str, value) -> None:
 def _check_count(owner: str, name: str, value) -> None:
     if not (isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0):
         raise ValueError(f"{owner}.{name} must be an integer >= 0, got {value!r}")
-
-
-def _check_vec3(owner: str, name: str, value) -> np.ndarray:
-    try:
-        a = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        a = np.zeros(0)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{owner}.{name} must be a finite 3-vector, got {value!r}")
-    return a
 
 
 @dataclass
@@ -138,42 +147,6 @@ class ShapeRegion:
 
 
 @dataclass
-class ShapeSphereCollider:
-    """Sphere of ``radius`` [m] centred at ``center`` [m], given in the frame of ``body``
-    (index into Control.body_*, -1 for the static world)."""
-
-    center: tuple = (0.0, 0.0, 0.0)
-    radius: float = 0.1
-    body: int = -1
-
-    def __post_init__(self):
-        self.center = _check_vec3("ShapeSphereCollider", "center", self.center)
-        if not (isinstance(self.radius, (int, float)) and math.isfinite(self.radius) and self.radius > 0):
-            raise ValueError(f"ShapeSphereCollider.radius must be a finite positive number, got {self.radius!r}")
-        if not (isinstance(self.body, (int, np.integer)) and self.body >= -1):
-            raise ValueError(f"ShapeSphereCollider.body must be an integer >= -1, got {self.body!r}")
-
-
-@dataclass
-class ShapeCapsuleCollider:
-    """Capsule: the points within ``radius`` [m] of the segment p0-p1 [m], given in the frame of
-    ``body`` (index into Control.body_*, -1 for the static world)."""
-
-    p0: tuple = (0.0, 0.0, 0.0)
-    p1: tuple = (0.0, 0.1, 0.0)
-    radius: float = 0.05
-    body: int = -1
-
-    def __post_init__(self):
-        self.p0 = _check_vec3("ShapeCapsuleCollider", "p0", self.p0)
-        self.p1 = _check_vec3("ShapeCapsuleCollider", "p1", self.p1)
-        if not (isinstance(self.radius, (int, float)) and math.isfinite(self.radius) and self.radius > 0):
-            raise ValueError(f"ShapeCapsuleCollider.radius must be a finite positive number, got {self.radius!r}")
-        if not (isinstance(self.body, (int, np.integer)) and self.body >= -1):
-            raise ValueError(f"ShapeCapsuleCollider.body must be an integer >= -1, got {self.body!r}")
-
-
-@dataclass
 class SolverShapeConfig:
     """Settings of :class:`SolverShape` (Han & Harada 2012).
 
@@ -183,8 +156,6 @@ class SolverShapeConfig:
             transforms [-].
         regions: one :class:`ShapeRegion` per region; strands pick theirs through the
             ``strand_region`` argument of :class:`SolverShape` [-].
-        colliders: spheres and capsules (:class:`ShapeSphereCollider`,
-            :class:`ShapeCapsuleCollider`, or any object with the same attributes) [-].
         air_drag: rate at which a vertex's velocity normal to the strand relaxes towards the
             wind ``control.air_velocity``; ``air_drag * dt`` must stay below 1 [1/s].
         check_finite: check every position and velocity after each step and raise
@@ -193,7 +164,6 @@ class SolverShapeConfig:
 
     method: int = 2
     regions: tuple = field(default_factory=lambda: (ShapeRegion(),))
-    colliders: tuple = ()
     air_drag: float = 1.0
     check_finite: bool = True
 
@@ -210,23 +180,10 @@ class SolverShapeConfig:
             if not isinstance(r, ShapeRegion):
                 raise ValueError(f"SolverShapeConfig.regions[{k}] must be a ShapeRegion, got {type(r).__name__}")
             r.__post_init__()  # re-validate: the dataclass may have been mutated
-        self.colliders = tuple(self.colliders)
-        for k, c in enumerate(self.colliders):
-            if _collider_kind(c) is None:
-                raise ValueError(f"SolverShapeConfig.colliders[{k}] must be a sphere (center, radius, body) or a "
-                                 f"capsule (p0, p1, radius, body), got {type(c).__name__}")
         if not (isinstance(self.air_drag, (int, float)) and math.isfinite(self.air_drag) and self.air_drag >= 0):
             raise ValueError(f"SolverShapeConfig.air_drag must be a finite number >= 0, got {self.air_drag!r}")
         if not isinstance(self.check_finite, bool):
             raise ValueError(f"SolverShapeConfig.check_finite must be a bool, got {self.check_finite!r}")
-
-
-def _collider_kind(c):
-    if all(hasattr(c, a) for a in ("p0", "p1", "radius", "body")):
-        return sc.COLLIDER_CAPSULE
-    if all(hasattr(c, a) for a in ("center", "radius", "body")):
-        return sc.COLLIDER_SPHERE
-    return None
 
 
 class SolverShape(StageTimer):
@@ -239,12 +196,13 @@ class SolverShape(StageTimer):
             ``[0, len(config.regions))``; default all 0.
         profile: if True, synchronise after each stage and accumulate wall times in
             ``stage_seconds`` (slower; for benchmarks).
-        collider_capacity: most colliders ``config.colliders`` may hold after
-            :meth:`upload_colliders`; default ``len(config.colliders)``.
+        colliders: bodies the hair collides with: :class:`~taichi_hair.colliders.PlaneCollider`,
+            ``SphereCollider``, ``CapsuleCollider``, ``MeshCollider``, or a built
+            :class:`~taichi_hair.colliders.ColliderSet` (as SolverADMM takes them); None: none.
 
     Regions, strand regions and colliders may be edited between steps (an interactive tool's
-    sliders, Sec. 6 Fig. 4): change ``config.regions`` or ``config.colliders`` and call
-    :meth:`upload_regions` / :meth:`upload_colliders`, or call :meth:`set_strand_region`.
+    sliders, Sec. 6 Fig. 4): change ``config.regions`` and call :meth:`upload_regions`, call
+    :meth:`set_strand_region`, or :meth:`set_colliders`.
 
     Fields (all allocated here, shape (vertex_count,) unless stated):
         vertex_rest_rotation: ^wR_i^0, rest global rotation of frame i, quaternion (x, y, z, w) [-].
@@ -256,11 +214,13 @@ class SolverShape(StageTimer):
         strand_region: region id, shape (strand_count,) [-].
         strand_head_rotation: ^wR_H of the strand's body, quaternion, shape (strand_count,) [-].
         region_*: the :class:`ShapeRegion` values, shape (region_count,).
-        collider_*: kind, body, points a/b [m] (body frame) and radius [m], shape (max(1, collider_capacity),).
+        vertex_collision_radius: hair radius of the vertex's strand (``RodMaterial.radius``), the
+            distance kept from colliders [m].
+        colliders: the :class:`~taichi_hair.colliders.ColliderSet` (its own fields), or None.
     """
 
     def __init__(self, model: Model, config: SolverShapeConfig | None = None, strand_region=None,
-                 profile: bool = False, collider_capacity: int | None = None):
+                 profile: bool = False, colliders=None):
         self.model = model
         self.config = config or SolverShapeConfig()
         cfg = self.config
@@ -269,11 +229,6 @@ class SolverShape(StageTimer):
         n, ns = model.vertex_count, model.strand_count
         self.region_count = len(cfg.regions)
         regions = self._check_strand_region(strand_region)
-        if collider_capacity is None:
-            collider_capacity = len(cfg.colliders)
-        if not (isinstance(collider_capacity, (int, np.integer)) and collider_capacity >= 0):
-            raise ValueError(f"SolverShape.collider_capacity must be an integer >= 0, got {collider_capacity!r}")
-        self.collider_capacity = int(collider_capacity)
         f = _np_float()
         quat = ti.types.vector(4, float)
         # Static rest data (Algorithm 2).
@@ -296,18 +251,15 @@ class SolverShape(StageTimer):
         self.region_local_iterations = ti.field(ti.i32, nr)
         self.region_length_iterations = ti.field(ti.i32, nr)
         self.region_damping = ti.field(float, nr)
-        # Colliders.
-        nc = max(1, self.collider_capacity)
-        self.collider_count = 0
-        self.collider_kind = ti.field(ti.i32, nc)
-        self.collider_body = ti.field(ti.i32, nc)
-        self.collider_point_a = ti.field(ti.math.vec3, nc)
-        self.collider_point_b = ti.field(ti.math.vec3, nc)
-        self.collider_radius = ti.field(float, nc)
+        # Colliders (Sec. 3.5).
+        self.vertex_collision_radius = ti.field(float, n)
+        self.colliders = None
         self._bad = ti.field(ti.i32, ())
 
         self.strand_region.from_numpy(regions)
-        self.upload_colliders()
+        radius = np.array([mat.radius for mat in model.materials], np.float64)
+        self.vertex_collision_radius.from_numpy(radius[h["vertex_strand"]].astype(f))
+        self.set_colliders(colliders)
         # Rest arc-length fraction of each vertex, for the S_G ramp.
         starts, counts = h["strand_vertex_start"], h["strand_vertex_count"]
         le = h["edge_rest_length"]
@@ -362,38 +314,30 @@ class SolverShape(StageTimer):
         """Assign region ids, shape (strand_count,), values in [0, len(config.regions)) (None: all 0)."""
         self.strand_region.from_numpy(self._check_strand_region(strand_region))
 
-    def upload_colliders(self) -> None:
-        """Copy ``config.colliders`` (at most ``collider_capacity``) to the collider fields."""
-        cfg = self.config
-        cfg.__post_init__()
-        if len(cfg.colliders) > self.collider_capacity:
-            raise ValueError(f"SolverShapeConfig.colliders holds {len(cfg.colliders)} colliders, more than the "
-                             f"solver's collider_capacity {self.collider_capacity}")
-        for k, c in enumerate(cfg.colliders):
-            if not (-1 <= int(c.body) < self.model.body_count):
-                raise ValueError(f"SolverShapeConfig.colliders[{k}].body must be -1 or a body index in "
-                                 f"[0, {self.model.body_count}), got {c.body!r}")
-        nc = max(1, self.collider_capacity)
-        kind = np.zeros(nc, np.int32)
-        body = np.full(nc, -1, np.int32)
-        pa = np.zeros((nc, 3))
-        pb = np.zeros((nc, 3))
-        rad = np.zeros(nc)
-        for k, c in enumerate(self.config.colliders):
-            kind[k] = _collider_kind(c)
-            body[k] = int(c.body)
-            rad[k] = float(c.radius)
-            if kind[k] == sc.COLLIDER_SPHERE:
-                pa[k] = pb[k] = np.asarray(c.center, np.float64)
-            else:
-                pa[k], pb[k] = np.asarray(c.p0, np.float64), np.asarray(c.p1, np.float64)
-        f = _np_float()
-        self.collider_kind.from_numpy(kind)
-        self.collider_body.from_numpy(body)
-        self.collider_point_a.from_numpy(pa.astype(f))
-        self.collider_point_b.from_numpy(pb.astype(f))
-        self.collider_radius.from_numpy(rad.astype(f))
-        self.collider_count = len(cfg.colliders)
+    def set_colliders(self, colliders) -> None:
+        """Replace the colliders (a list of :mod:`taichi_hair.colliders` objects, a ``ColliderSet``, or
+        None/empty for none).  A list is built into a new ``ColliderSet`` here (this allocates: call it
+        between steps, not inside one).  As for any new ``ColliderSet``, the first step after this one
+        sees no body motion (its begin-of-step transforms are its end-of-step ones), which only matters
+        to friction."""
+        from .colliders import ColliderSet
+
+        if colliders is None or (not isinstance(colliders, ColliderSet) and len(colliders) == 0):
+            self.colliders = None
+            return
+        if not isinstance(colliders, ColliderSet):
+            colliders = ColliderSet(colliders, self.model.body_count)
+        elif colliders.body_count != self.model.body_count:
+            raise ValueError(f"SolverShape: the ColliderSet has {colliders.body_count} bodies, the model "
+                             f"{self.model.body_count}")
+        self.colliders = colliders
+
+    def reset_collider_motion(self) -> None:
+        """Forget the bodies' last transforms: the next step sees no body motion (as the first step
+        does).  Friction uses each collider's motion over a step; call this after putting the State
+        or the Control back in time (a reset, a restart), so a jump of the bodies is not read as motion."""
+        if self.colliders is not None:
+            self.colliders.has_begin = False
 
     # ------------------------------------------------------------------ stepping
     def step(self, state: State, control: Control, dt: float) -> None:
@@ -438,9 +382,10 @@ class SolverShape(StageTimer):
             sc.solve_edge_lengths_batch(m, self, 0, it, x)
             sc.solve_edge_lengths_batch(m, self, 1, it, x)
         t0 = self._tock("length", t0)
-        # 6. Collision handling (Sec. 3.5).
-        if self.collider_count:
-            sc.project_collisions(m, self, rot, tr, self.collider_count, x)
+        # 6. Collision handling (Sec. 3.5), colliders at the end-of-step body transforms.
+        if self.colliders is not None:
+            self.colliders.begin_step(control)
+            sc.project_collisions(m, self, self.colliders, x)
         t0 = self._tock("collide", t0)
         # 7. Velocities for the next Verlet step; finiteness.
         sc.end_step(self, dt, x, v)
