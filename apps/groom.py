@@ -12,9 +12,12 @@ Mouse and keys (also listed in the side panel):
 * left drag with the active tool -- ``select`` (click: strands under the cursor, within the brush
   radius of the pick ray; shift adds), ``drag`` (grab the strands under the cursor and pull them in the
   plane facing the camera; release to let go), ``trim`` (click: cut along the plane through the pick
-  ray and the screen's horizontal), ``comb`` (drags the strands under the brush along the mouse motion:
-  an approximation, the swept frictional collider of the issue is not in), ``pin`` (pins the vertices
-  under the cursor; shift unpins);
+  ray and the screen's horizontal), ``comb`` (sweeps a comb along the mouse stroke: a capsule tooth of
+  the brush radius along the view direction, through the whole groom's depth, moving in the plane facing
+  the camera through the strands under the cursor; it is a frictional collider of the simulation
+  (``GroomingSession.comb``, friction ``comb_friction``), run one segment of about a brush radius at a
+  time, each segment an undoable, logged edit), ``pin`` (pins the vertices under the cursor; shift
+  unpins);
 * right drag orbits, middle drag (or shift + right drag) pans, ``-``/``=`` zoom (GGUI 1.7 reports no wheel);
 * keys: 1-5 tools, ``u`` undo, ``y`` redo, ``space`` simulation on/off, ``c`` cycles colours,
   ``g`` grows (x1.2) and ``h`` shortens (x0.8) the selection, ``k``/``l`` curl x1.25 / x0.8,
@@ -50,7 +53,8 @@ class GroomApp:
     Attributes:
         tool: active tool, one of ``TOOLS``.
         color_mode: strand colours, one of ``COLOR_CYCLE``.
-        brush_radius: pick radius around the mouse ray [m].
+        brush_radius: pick radius around the mouse ray, and the comb's radius [m].
+        comb_friction: Coulomb coefficient of the comb against hair [-].
         message: last status or error line (shown in the panel).
         frame_ms: wall time of the last displayed frame, simulation + skinning + drawing [ms].
         sim_ms: of which the session's ``advance`` [ms].
@@ -77,6 +81,7 @@ class GroomApp:
         self.target = 0.5 * (lo + hi)
         self.size = max(float(np.linalg.norm(hi - lo)), 1e-3)
         self.brush_radius = 0.02 * self.size
+        self.comb_friction = 0.5
         self.yaw, self.pitch = math.radians(30.0), math.radians(12.0)
         self.distance = 1.7 * self.size
         self.fov = 35.0
@@ -147,15 +152,25 @@ class GroomApp:
             n = self._guard("trim", lambda: s.trim(o.tolist(), normal.tolist()))
             if n is not None:
                 self.message = f"trimmed {n} strands"
-        elif self.tool in ("drag", "comb"):
+        elif self.tool == "drag":
             hit = self._guard("select", lambda: s.select_ray(o.tolist(), d.tolist(), self.brush_radius))
             if not hit:
                 self.message = f"{self.tool}: no strand under the cursor"
                 return
             anchor = s.groom.points[s.vertex_selection].astype(np.float64).mean(axis=0)
             self._drag_plane = (anchor, -d)  # a plane facing the camera through the grabbed strands
-            self._comb_last = (col, row)
             self.message = f"{self.tool}: {hit} strands"
+        elif self.tool == "comb":
+            # The stroke's plane faces the camera through the strands under the cursor (the groom's
+            # centre when there are none); the selection is left alone.
+            p = s.groom.points.astype(np.float64)
+            t = (p - o) @ d
+            near = (t > 0) & (np.linalg.norm(p - o - t[:, None] * d, axis=1) <= self.brush_radius)
+            anchor = p[near].mean(axis=0) if near.any() else np.asarray(self.target, np.float64)
+            self._drag_plane = (anchor, -d)
+            self._comb_last = self._plane_point(col, row)
+            self.message = f"comb: {int(np.logical_or.reduceat(near, s.groom.strand_offsets[:-1]).sum())} strands " \
+                           "under the cursor"
 
     def _plane_point(self, col, row):
         o, d = self.ray(col, row)
@@ -176,14 +191,15 @@ class GroomApp:
         if self.tool == "drag":
             self._guard("drag", lambda: s.drag((p - self._drag_plane[0]).tolist(), stiffness=0.5))
         elif self.tool == "comb" and self._comb_last is not None:
-            q = self._plane_point(*self._comb_last)
-            if q is not None and np.linalg.norm(p - q) > 0:
-                o, d = self.ray(col, row)
-                if s.dragging:
-                    self._guard("release", s.release)
-                if self._guard("select", lambda: s.select_ray(o.tolist(), d.tolist(), self.brush_radius, mode="add")):
-                    self._guard("drag", lambda: s.drag((p - q).tolist(), stiffness=0.5))
-                self._comb_last = (col, row)
+            q = self._comb_last
+            if np.linalg.norm(p - q) >= self.brush_radius:  # a segment of about a brush radius per comb edit
+                axis = self._drag_plane[1]  # the view direction: the tooth goes through the whole depth
+                n = self._guard("comb", lambda: s.comb([q.tolist(), p.tolist()], self.brush_radius,
+                                                       axis=axis.tolist(), length=2.0 * self.size,
+                                                       friction=self.comb_friction))
+                if n is not None:
+                    self.message = f"comb: {n} strands combed"
+                self._comb_last = p
 
     def release(self) -> None:
         """Left button released: ends a drag or comb stroke."""
@@ -309,6 +325,7 @@ def _panel(app, window):
         it = w.slider_int("iterations", s.config.iterations, 1, 50)
         if it != s.config.iterations:
             app._guard("set_parameter", lambda: s.set_parameter("iterations", it))
+        app.comb_friction = w.slider_float("comb friction", app.comb_friction, 0.0, 1.0)
         fr = w.slider_float("friction", s.config.friction, 0.0, 1.0)
         if abs(fr - s.config.friction) > 1e-6:
             app._guard("set_parameter", lambda: s.set_parameter("friction", fr))

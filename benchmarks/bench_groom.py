@@ -36,6 +36,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
+from machine_info import machine  # benchmarks/machine_info.py (the script folder is on sys.path)
+
 
 def main(argv=None):
     p = argparse.ArgumentParser()
@@ -63,7 +65,8 @@ def main(argv=None):
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
            "image": list(args.size), "machine": platform.processor() or platform.machine(),
            "cpu_count": os.cpu_count(), "date": datetime.date.today().isoformat(),
-           "command": "python benchmarks/bench_groom.py " + " ".join(sys.argv[1:] if argv is None else argv)}
+           "command": "python benchmarks/bench_groom.py " + " ".join(sys.argv[1:] if argv is None else argv),
+           "machine_info": machine()}
 
     t = time.perf_counter()
     head = load_head()
@@ -150,6 +153,7 @@ def _measure(args, res, frame, session, sim, groom, ti, out, viewer):
 
     # An edit: grow 10 % of the strands; the next frame updates the Model in place.
     session.select_strands(np.arange(0, groom.strand_count, 10))
+    res["load_average_at_edit"] = list(os.getloadavg())
     t = time.perf_counter()
     session.scale_length(1.1)
     res["edit_scale_length_s"] = time.perf_counter() - t
@@ -162,7 +166,8 @@ def _measure(args, res, frame, session, sim, groom, ti, out, viewer):
     res["rebuilds"], res["updates"] = session.rebuild_count, session.update_count
     print(f"edit: scale_length on {groom.strand_count // 10} strands {res['edit_scale_length_s']:.2f} s (host), "
           f"in-place update {res['in_place_update_s']:.2f} s, next frame " +
-          ", ".join(f"{k} {v:.0f} ms" for k, v in res["frame_after_edit_ms"].items()), flush=True)
+          ", ".join(f"{k} {v:.0f} ms" for k, v in res["frame_after_edit_ms"].items())
+          + f" (load average {' '.join(f'{v:.2f}' for v in res['load_average_at_edit'])})", flush=True)
     m = res["ms_per_frame"]
     print(f"ms per frame (mean of {args.frames}): simulation {m['simulation']['mean']:.0f}, "
           f"skinning {m['skinning']['mean']:.0f}, drawing {m['drawing']['mean']:.0f}")

@@ -44,15 +44,45 @@ class GroomBuilder:
         if not (isinstance(body_count, int) and body_count >= 1):
             raise ValueError(f"GroomBuilder.body_count must be an integer >= 1, got {body_count!r}")
         self.body_count = body_count
+        # Strands are kept in chunks (one per add_strand / add_strands call), each as flat arrays:
+        # points (n, 3) [m], per-strand vertex counts (k,), materials (k,), bodies (k,),
+        # rest twists (n,) [rad] and root directors (k, 3).
         self._points: list[np.ndarray] = []
+        self._counts: list[np.ndarray] = []
         self._materials: list[RodMaterial] = []
-        self._bodies: list[int] = []
+        self._bodies: list[np.ndarray] = []
         self._twists: list[np.ndarray] = []
         self._directors: list[np.ndarray] = []
+        self._strand_count = 0
 
     @property
     def strand_count(self) -> int:
-        return len(self._points)
+        return self._strand_count
+
+    def _material(self, where: str, material) -> RodMaterial:
+        if material is None:
+            return RodMaterial()
+        if isinstance(material, dict):
+            try:
+                return RodMaterial(**material)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"{where}: field 'material': {exc}") from None
+        if not isinstance(material, RodMaterial):
+            raise ValueError(f"{where}: field 'material' must be a RodMaterial or dict, got {type(material).__name__}")
+        try:  # re-validate: the dataclass may have been mutated after construction
+            material.__post_init__()
+        except ValueError as exc:
+            raise ValueError(f"{where}: field 'material': {exc}") from None
+        return material
+
+    def _root_body(self, where: str, root: str, body) -> int:
+        if root not in ROOT_MODES:
+            raise ValueError(f"{where}: field 'root' must be one of {ROOT_MODES}, got {root!r}")
+        if root == "clamped":
+            if not (isinstance(body, (int, np.integer)) and 0 <= body < self.body_count):
+                raise ValueError(f"{where}: field 'body' must be in [0, {self.body_count}), got {body!r}")
+            return int(body)
+        return -1
 
     def add_strand(self, points, material: RodMaterial | dict | None = None, root: str = "clamped",
                    body: int = 0, twist=None, root_director=None) -> int:
@@ -94,28 +124,8 @@ class GroomBuilder:
             k = int(tiny[0])
             raise ValueError(
                 f"{where}: field 'points' has a zero-length edge between vertices {k} and {k + 1} (repeated point)")
-        if material is None:
-            material = RodMaterial()
-        elif isinstance(material, dict):
-            try:
-                material = RodMaterial(**material)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"{where}: field 'material': {exc}") from None
-        elif not isinstance(material, RodMaterial):
-            raise ValueError(f"{where}: field 'material' must be a RodMaterial or dict, got {type(material).__name__}")
-        else:
-            try:  # re-validate: the dataclass may have been mutated after construction
-                material.__post_init__()
-            except ValueError as exc:
-                raise ValueError(f"{where}: field 'material': {exc}") from None
-        if root not in ROOT_MODES:
-            raise ValueError(f"{where}: field 'root' must be one of {ROOT_MODES}, got {root!r}")
-        if root == "clamped":
-            if not (isinstance(body, (int, np.integer)) and 0 <= body < self.body_count):
-                raise ValueError(f"{where}: field 'body' must be in [0, {self.body_count}), got {body!r}")
-            body = int(body)
-        else:
-            body = -1
+        material = self._material(where, material)
+        body = self._root_body(where, root, body)
         if twist is None:
             tw = np.zeros(m)
         else:
@@ -135,38 +145,136 @@ class GroomBuilder:
                 raise ValueError(f"{where}: field 'root_director' must be finite and not parallel to the root edge")
             d1 = d1 / n
         self._points.append(pts)
+        self._counts.append(np.array([m], dtype=np.int64))
         self._materials.append(material)
-        self._bodies.append(body)
+        self._bodies.append(np.array([body], dtype=np.int32))
+        self._twists.append(tw)
+        self._directors.append(d1[None, :])
+        self._strand_count += 1
+        return idx
+
+    def add_strands(self, points, offsets, material: RodMaterial | dict | None = None, root: str = "clamped",
+                    body: int = 0, twist=None, root_directors=None) -> np.ndarray:
+        """Add many strands at once (vectorised); returns their indices.
+
+        The same strands as :meth:`add_strand` called once per strand, and the same host arrays
+        after :meth:`finalize`, bit for bit (tested), at a fraction of the cost for thousands.
+
+        Args:
+            points: (n, 3) vertices of all strands, each strand's root first [m].
+            offsets: (k + 1,) start of each strand in ``points`` and n at the end (increasing).
+            material, root, body: as :meth:`add_strand`, shared by the k strands.
+            twist: optional (n,) rest twist angles [rad] (each strand's last entry is ignored).
+            root_directors: optional (k, 3) root directors (see :meth:`add_strand`).
+
+        Raises:
+            ValueError naming the first bad strand (its index in this builder) and the field,
+            as :meth:`add_strand` does.
+        """
+        first = self._strand_count
+        where = f"strands {first}..: add_strands"
+        try:
+            pts = np.array(points, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{where}: field 'points' is not a numeric array ({exc})") from None
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ValueError(f"{where}: field 'points' must have shape (n, 3), got {pts.shape}")
+        try:
+            off = np.asarray(offsets).astype(np.int64, casting="safe").reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: field 'offsets' must be integers, got {offsets!r}") from None
+        if off.size < 2 or off[0] != 0 or off[-1] != pts.shape[0]:
+            raise ValueError(f"{where}: field 'offsets' must start at 0 and end at the vertex count {pts.shape[0]}")
+        counts = np.diff(off)
+        ns = counts.size
+        short = np.nonzero(counts < 3)[0]
+        if short.size:
+            k = int(short[0])
+            raise ValueError(f"strand {first + k}: field 'points' has {int(counts[k])} vertices; "
+                             "a strand needs at least 3")
+        strand_of = np.repeat(np.arange(ns), counts)
+        bad = np.nonzero(~np.all(np.isfinite(pts), axis=1))[0]
+        if bad.size:
+            v = int(bad[0])
+            k = int(strand_of[v])
+            raise ValueError(f"strand {first + k}: field 'points' has a non-finite coordinate at vertex "
+                             f"{v - int(off[k])}")
+        # Edge lengths on a padded (k, max edges) grid (NaN beyond each strand), as add_strand per strand.
+        lengths = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        local = np.arange(pts.shape[0]) - off[strand_of]
+        edge = np.nonzero(local[:-1] < np.repeat(counts - 1, counts)[:-1])[0]  # edge slots inside a strand
+        grid = np.full((ns, int(counts.max()) - 1), np.nan)
+        grid[strand_of[edge], local[edge]] = lengths[edge]
+        median = np.nanmedian(grid, axis=1)
+        tiny = np.nonzero((grid == 0) | (grid <= 1e-6 * median[:, None]))
+        if tiny[0].size:
+            k, j = int(tiny[0][0]), int(tiny[1][0])
+            raise ValueError(f"strand {first + k}: field 'points' has a zero-length edge between vertices {j} and "
+                             f"{j + 1} (repeated point)")
+        material = self._material(where, material)
+        body = self._root_body(where, root, body)
+        if twist is None:
+            tw = np.zeros(pts.shape[0])
+        else:
+            tw = np.array(twist, dtype=np.float64).reshape(-1)
+            if tw.shape[0] != pts.shape[0] or not np.all(np.isfinite(tw)):
+                raise ValueError(f"{where}: field 'twist' must hold {pts.shape[0]} finite angles")
+            tw[off[1:] - 1] = 0.0
+        t0 = (pts[off[:-1] + 1] - pts[off[:-1]]) / lengths[off[:-1]][:, None]
+        if root_directors is None:
+            a = np.where((np.abs(t0[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+            d1 = np.cross(t0, a)
+            d1 = d1 / np.linalg.norm(d1, axis=1)[:, None]
+        else:
+            d1 = np.array(root_directors, dtype=np.float64).reshape(ns, 3)
+            d1 = d1 - np.sum(d1 * t0, axis=1)[:, None] * t0
+            n = np.linalg.norm(d1, axis=1)
+            bad = np.nonzero(~np.isfinite(n) | (n < 1e-6))[0]
+            if bad.size:
+                raise ValueError(f"strand {first + int(bad[0])}: field 'root_director' must be finite and not "
+                                 "parallel to the root edge")
+            d1 = d1 / n[:, None]
+        self._points.append(pts)
+        self._counts.append(counts)
+        self._materials.extend([material] * ns)
+        self._bodies.append(np.full(ns, body, dtype=np.int32))
         self._twists.append(tw)
         self._directors.append(d1)
-        return idx
+        self._strand_count += ns
+        return np.arange(first, first + ns)
 
     # ------------------------------------------------------------------ finalize
     def finalize(self) -> Model:
         """Compute the rest state in float64 (vectorised over strands) and allocate every field once."""
         if not self._points:
             raise ValueError("GroomBuilder.finalize: no strands were added")
-        counts = np.array([p.shape[0] for p in self._points], dtype=np.int64)
+        counts = np.concatenate(self._counts)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         n = int(counts.sum())
-        ns = len(self._points)
+        ns = self._strand_count
         mats = self._materials
         strand_of = np.repeat(np.arange(ns), counts)
         local = np.arange(n) - np.repeat(starts, counts)
         last = local == np.repeat(counts - 1, counts)  # ghost edge slots
         pts = np.concatenate(self._points)
 
-        def per_strand(values):
-            return np.array(values, dtype=np.float64)
+        # Per-strand material values, evaluated once per distinct material object (bulk strands share one).
+        slot: dict = {}
+        which = np.array([slot.setdefault(id(m), len(slot)) for m in mats], dtype=np.int64)
+        distinct = list({id(m): m for m in mats}.values())
 
-        area = per_strand([m.area for m in mats])
-        density = per_strand([m.density for m in mats])
-        e_stretch = per_strand([m.youngs_modulus_stretch for m in mats])
-        e_bend = per_strand([m.youngs_modulus_bend for m in mats])
-        polar = per_strand([m.polar_inertia for m in mats])
-        radius = per_strand([m.radius for m in mats])
-        kdiag = np.array([m.stiffness_matrix_diag() for m in mats], dtype=np.float64)
-        bodies = np.array(self._bodies, np.int32)
+        def per_strand(values):
+            return np.array(values, dtype=np.float64)[which]
+
+        area = per_strand([m.area for m in distinct])
+        density = per_strand([m.density for m in distinct])
+        e_stretch = per_strand([m.youngs_modulus_stretch for m in distinct])
+        e_bend = per_strand([m.youngs_modulus_bend for m in distinct])
+        polar = per_strand([m.polar_inertia for m in distinct])
+        radius = per_strand([m.radius for m in distinct])
+        kdiag = np.array([m.stiffness_matrix_diag() for m in distinct], dtype=np.float64)[which]
+        damping = per_strand([m.damping_time for m in distinct])
+        bodies = np.concatenate(self._bodies)
 
         # Edges (slot i joins i and i+1; the last slot of each strand is a ghost).
         edge = np.zeros((n, 3))
@@ -187,7 +295,7 @@ class GroomBuilder:
         # Rest reference frames: space-parallel transport of the root director along each strand,
         # advanced one local index at a time for all strands at once.
         dirs = np.zeros((n, 3))
-        root_dirs = np.array(self._directors)
+        root_dirs = np.concatenate(self._directors)
         dirs[starts] = root_dirs
         for j in range(1, int(counts.max()) - 1):
             idx = starts[counts - 1 > j] + j
@@ -222,7 +330,7 @@ class GroomBuilder:
             "strand_vertex_count": counts.astype(np.int32),
             "strand_body": bodies,
             "strand_root_director": root_dirs,
-            "strand_damping_time": per_strand([m.damping_time for m in mats]),
+            "strand_damping_time": damping,
             # Host-only per-strand material summary.
             "strand_radius": radius, "strand_density": density, "strand_area": area,
             "strand_youngs_modulus_bend": e_bend,

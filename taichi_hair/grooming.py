@@ -26,6 +26,13 @@ by :meth:`~GroomingSession.replay`):
   the moving target (anchor + ``target_offset``): an overdamped spring seen
   frame by frame, with time constant -1/ln(1 - stiffness) frames.  The rest of
   each strand follows through elasticity and contacts.  :meth:`release` ends it.
+* :meth:`comb` sweeps a comb through the hair: a capsule "tooth" of the given radius
+  (a sphere brush when its length is 0), a frictional body collider of the ADMM
+  contact pipeline (Sec. 4.5) on its own body (``COMB_BODY``), moved along a path
+  of points, one quasistatic step (``config.iterations`` ADMM iterations) per
+  ``step`` [m] of path.  Hair is pushed by the contacts and dragged by Coulomb
+  friction, never moved directly.  The strands the comb touched then keep the
+  combed shape as their rest pose (see :meth:`comb`).
 * :meth:`trim` cuts the strands whose *current* polyline crosses a plane (the
   cut seen on screen); the same rest arc length cuts the rest pose.
 * :meth:`scale_length` shortens (cut at the scaled rest arc length) or grows
@@ -53,14 +60,16 @@ is taken before it, so undo and redo restore the groom bit for bit.  The
 solver's warm-start state (twists, multipliers) restarts from the restored
 groom, as after loading it.
 
-Rest-pose changes (trim, scale_length, scale_curl, undo/redo across them) and
+Rest-pose changes (trim, scale_length, scale_curl, comb, undo/redo across them) and
 material parameters (youngs_modulus, radius, density, w0) update the Model in
 place, *lazily* at the next frame (a burst of edits costs one update):
 :meth:`Model.update` with the host arrays a :class:`GroomBuilder` computes for
 the new rest shapes, ``SolverADMM.refresh_model`` and ``SkinningLBS.rebind``,
 all into the fields that exist already, so Taichi compiles nothing again.  The
 frames after an in-place update are bit for bit those of a new session opened
-on the edited groom (tested).  Only parameters that change which strands are
+on the edited groom (tested).  The guides' Model has two bodies (the head and the comb) and the
+solver always has a contact pipeline (hair-hair contacts as configured, the scene colliders and the
+idle comb), so the comb never needs a new Model either.  Only parameters that change which strands are
 simulated or the contact set-up (``LAYOUT_PARAMETERS``: guide_ratio,
 neighbour_count, seed, contacts, contact_margin) build a new Model and solver,
 and then Taichi recompiles every kernel (kernels are specialised per field;
@@ -91,7 +100,7 @@ from .io import Groom, load_groom, save_groom
 
 MODES = ("replace", "add", "remove")
 #: Actions that change the groom or the simulation set-up: each pushes an undo snapshot.
-EDIT_ACTIONS = ("drag", "release", "trim", "scale_length", "scale_curl", "pin", "unpin", "set_parameter")
+EDIT_ACTIONS = ("drag", "release", "comb", "trim", "scale_length", "scale_curl", "pin", "unpin", "set_parameter")
 #: Every action a session log may hold (each is a method of :class:`GroomingSession`).
 ACTIONS = ("select", "select_ray", "select_strands", "select_all", "simulate", "advance", "undo", "redo") \
     + EDIT_ACTIONS
@@ -102,6 +111,10 @@ REBUILD_PARAMETERS = ("youngs_modulus", "radius", "density", "guide_ratio", "nei
 #: slots, the contact pipeline): a new Model and solver are built and Taichi recompiles the kernels.
 #: The others update the Model in place (:meth:`Model.update`, no recompilation).
 LAYOUT_PARAMETERS = ("guide_ratio", "neighbour_count", "seed", "contacts", "contact_margin")
+#: Body of the comb in the guides' Model and Control (body 0 is the head, the identity).
+COMB_BODY = 1
+#: Most quasistatic steps one comb stroke may take (a longer path needs a larger ``step``).
+COMB_MAX_STEPS = 2000
 
 
 # =========================================================================== configuration
@@ -206,15 +219,37 @@ def _positive(name: str, value, allow_zero: bool = False) -> float:
     return float(value)
 
 
+def _path(name: str, value) -> np.ndarray:
+    """A polyline of at least 2 finite points (x, y, z) [m], float64 (m, 3)."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.zeros((0, 0))
+    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] < 2:
+        text = repr(value)
+        raise ValueError(f"'{name}' must be a list of at least 2 points [x, y, z] [m], got "
+                         f"{text if len(text) <= 80 else text[:77] + '...'}")
+    bad = np.nonzero(~np.all(np.isfinite(a), axis=1))[0]
+    if bad.size:
+        raise ValueError(f"'{name}' has a non-finite coordinate at point {int(bad[0])}: {a[bad[0]].tolist()}")
+    return a
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of two 3-vectors: the products and differences of ``np.cross`` (same bits), without its
+    per-call axis handling, which dominated the per-strand edits (measured: 60 us a call)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
     """Rodrigues rotation of v about unit ``axis`` by ``angle`` [rad]."""
     c, s = math.cos(angle), math.sin(angle)
-    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1.0 - c)
+    return v * c + _cross(axis, v) * s + axis * np.dot(axis, v) * (1.0 - c)
 
 
 def _perpendicular(t: np.ndarray) -> np.ndarray:
     a = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    d = np.cross(t, a)
+    d = _cross(t, a)
     return d / np.linalg.norm(d)
 
 
@@ -225,12 +260,12 @@ def _pair_frame(t0: np.ndarray, t1: np.ndarray):
     if ln < 1e-9:
         return None
     n /= ln
-    return np.column_stack([t0, n, np.cross(t0, n)])
+    return np.column_stack([t0, n, _cross(t0, n)])
 
 
 def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Smallest rotation matrix taking unit a to unit b."""
-    v = np.cross(a, b)
+    v = _cross(a, b)
     c = float(np.dot(a, b))
     if np.linalg.norm(v) < 1e-12:
         return np.eye(3) if c > 0 else _rotation_matrix(_perpendicular(a), math.pi)
@@ -270,7 +305,7 @@ def _tip_frame_map(rest: np.ndarray, cur: np.ndarray) -> np.ndarray:
 
 def _arc(p: np.ndarray) -> np.ndarray:
     """Cumulative arc length at every vertex of polyline p [m], shape (m,)."""
-    return np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
+    return np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))))
 
 
 def _sample(knots: np.ndarray, points: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -309,9 +344,9 @@ def _turning(p: np.ndarray):
     u = _perpendicular(t[0])
     angles, comps = [], []
     for i in range(1, len(t)):
-        b = np.cross(t[i - 1], t[i])
+        b = _cross(t[i - 1], t[i])
         s, c = np.linalg.norm(b), float(np.dot(t[i - 1], t[i]))
-        v = np.cross(t[i - 1], u)
+        v = _cross(t[i - 1], u)
         if s < 1e-14:
             angles.append(0.0)
             comps.append((1.0, 0.0))
@@ -332,7 +367,7 @@ def _scale_curl_polyline(p: np.ndarray, factor: float) -> np.ndarray:
     out[0], out[1] = p[0], p[1]
     ti_, u = t[0].copy(), _perpendicular(t[0])
     for i in range(1, len(t)):
-        v = np.cross(ti_, u)
+        v = _cross(ti_, u)
         a = comps[i - 1][0] * u + comps[i - 1][1] * v
         na = np.linalg.norm(a)
         if angles[i - 1] != 0.0 and na > 0:
@@ -462,6 +497,10 @@ class GroomingSession:
         self.groom = g
         self.config = replace(config)
         self.colliders = list(colliders) if colliders else []
+        for k, c in enumerate(self.colliders):
+            if getattr(c, "body", -1) not in (-1, 0):
+                raise ValueError(f"GroomingSession: collider {k} is on body {c.body}; a grooming session has the "
+                                 f"static world (-1) and the head (0) only (body {COMB_BODY} is the comb's)")
         self.autosave_path = None if autosave_path is None else os.fspath(autosave_path)
         self.simulating = True
         self.log: list[dict] = []
@@ -1026,6 +1065,133 @@ class GroomingSession:
         """Free the selected vertices."""
         self._set_pins("unpin", False)
 
+    # ------------------------------------------------------------------ the comb
+    def comb(self, path, radius, axis=(0.0, 0.0, 1.0), length=0.0, friction=0.3, step=None) -> int:
+        """Sweep a comb through the hair along ``path``; returns the number of strands it combed.
+
+        The comb is one capsule "tooth": the points within ``radius`` [m] of a segment of
+        ``length`` [m] along ``axis`` centred on the comb's position (``length`` 0: a sphere
+        brush).  It is a body collider of the ADMM contact pipeline (a :class:`CapsuleCollider` on
+        body ``COMB_BODY`` with Coulomb coefficient ``friction`` [-]), present in the solver from
+        its build on and idle between strokes (it acts on no strand), so a stroke compiles nothing.
+        (A comb with several teeth would need one collider slot per tooth at the build.)
+
+        The stroke moves the comb's position along the polyline ``path`` (world coordinates [m])
+        in equal steps of at most ``step`` [m] (default ``radius / 2``), one quasistatic solver
+        step (``config.iterations`` ADMM iterations) per step, with the comb's end-of-step
+        transform in Control.  Contacts are detected at the beginning of a step and carry the
+        comb's surface point to its end-of-step position (Sec. 4.5), so hair ahead of the comb is
+        pushed (a vertex the comb overtakes stays in its front half as long as a step is shorter
+        than the radius, and is pushed forward, not backward; a step longer than the diameter
+        would jump over strands) and hair in touch is dragged along by friction, at most mu times
+        the normal force.  The hair is never moved directly.
+
+        Rest pose: afterwards every strand the comb touched (a comb contact in some step), and
+        every skinned strand bound to such a guide, takes its current pose as its rest pose
+        (the clamped root edge is kept bit for bit), so the combed shape stays when the
+        simulation goes on; the other strands keep theirs (strands moved only through hair-hair
+        contacts relax back).  ``drag``/``release`` never change the rest pose; a comb is a
+        shape edit, like :meth:`scale_curl`.  A drag in progress ends.  The comb steps the solver
+        even when the simulation is off (``simulate(False)``): the stroke is the edit.
+        """
+        pts = _path("path", path)
+        r = _positive("radius", radius)
+        ax = _vec3("axis", axis)
+        if np.linalg.norm(ax) == 0:
+            raise ValueError("'axis' must be a non-zero vector")
+        length_ = _positive("length", length, allow_zero=True)
+        mu = _positive("friction", friction, allow_zero=True)
+        h = 0.5 * r if step is None else _positive("step", step)
+        moving = np.r_[True, np.any(np.diff(pts, axis=0) != 0.0, axis=1)]
+        knots = _arc(pts[moving])
+        total = float(knots[-1])
+        if total == 0.0:
+            raise ValueError("'path' must move: its points are all equal")
+        n = max(1, int(math.ceil(total / h * (1.0 - 1e-12))))
+        if n > COMB_MAX_STEPS:
+            raise ValueError(f"the path ({total:.4g} m) needs {n} steps of {h:.4g} m, more than {COMB_MAX_STEPS}; "
+                             "pass a larger 'step'")
+        positions = _sample(knots, pts[moving], np.linspace(0.0, total, n + 1))
+        positions[-1] = pts[-1]
+
+        def apply():
+            if self._drag is not None:
+                self._drag = None
+                if self._sim is not None:
+                    self._apply_kinematics()
+            self._ensure_built()
+            touched = self._sweep_comb(positions, r, ax / np.linalg.norm(ax), length_, mu)
+            self._commit_combed(touched)
+
+        self._combed_count = 0
+        self._edit("comb", {"path": pts.tolist(), "radius": r, "axis": ax.tolist(), "length": length_,
+                            "friction": mu, "step": h}, apply)
+        return self._combed_count
+
+    def _sweep_comb(self, positions: np.ndarray, radius: float, axis: np.ndarray, length: float,
+                    friction: float) -> np.ndarray:
+        """Move the comb collider through ``positions`` (n + 1, 3) [m], one solver step per move;
+        returns which guides (Model strands) had a comb contact, bool (guide_count,)."""
+        import taichi as ti
+
+        sim = self._sim
+        solver, control = sim.solver, sim.control
+        cs = solver.contacts.colliders
+        k = sim.comb_collider
+        half = 0.5 * length * axis
+        cs.collider_a[k] = (-half).tolist()
+        cs.collider_b[k] = half.tolist()
+        cs.collider_radius[k] = radius
+        cs.collider_friction[k] = friction
+        # The first move starts at positions[0]: the begin-of-step transform of the comb body is the end
+        # transform the ColliderSet keeps from the previous step (body 0, the head, never moves).
+        control.body_translation[COMB_BODY] = positions[0].tolist()
+        if not cs.has_begin:
+            cs.body_rotation_end.copy_from(control.body_rotation)
+            cs.body_translation_end.copy_from(control.body_translation)
+            cs.has_begin = True
+        cs.body_translation_end[COMB_BODY] = positions[0].tolist()
+        cs.collider_strands[k] = [0, 2**31 - 1]
+        touched = np.zeros(sim.model.strand_count, dtype=bool)
+        vertex_strand = sim.model.host["vertex_strand"]
+        try:
+            for q in positions[1:]:
+                t0 = time.perf_counter()
+                control.body_translation[COMB_BODY] = q.tolist()
+                solver.step(sim.state, control, 1.0)
+                con = solver.contacts
+                nc = con.contact_count
+                if nc:
+                    mine = con.con.contact_collider.to_numpy()[:nc] == k
+                    touched[vertex_strand[con.con.contact_vertex.to_numpy()[:nc, 0][mine]]] = True
+                ti.sync()
+                self.timings["frame"].append(time.perf_counter() - t0)
+        finally:
+            cs.collider_strands[k] = [0, 0]  # idle: acts on no strand
+        self._write_back()
+        return touched
+
+    def _commit_combed(self, touched: np.ndarray) -> None:
+        """Rest pose <- current pose on the guides ``touched`` and the skinned strands bound to them
+        (root edge kept); sets ``_combed_count``."""
+        sim, g = self._sim, self.groom
+        combed = np.zeros(g.strand_count, dtype=bool)
+        combed[self._guide_strands()[touched]] = True
+        if sim.skin is not None:
+            bound = sim.skin.host["render_strand_guides"]
+            weight = sim.skin.host["render_strand_weights"]
+            combed |= np.any(touched[bound] & (weight > 0.0), axis=1)
+        self._combed_count = int(combed.sum())
+        if not combed.any():
+            return
+        counts = g.strand_vertex_counts()
+        local = np.arange(g.vertex_count) - np.repeat(g.strand_offsets[:-1], counts)
+        mask = np.repeat(combed, counts) & (local >= 2)
+        rest = g.rest_points.copy()
+        rest[mask] = g.points[mask].astype(rest.dtype)
+        self.groom = replace(g, rest_points=rest, params=dict(g.params)).validate()
+        self._invalidate(layout=False)
+
     # ------------------------------------------------------------------ parameters, simulation
     def set_parameter(self, name, value) -> None:
         """Set one :class:`GroomingConfig` field (validated; errors name the field)."""
@@ -1088,16 +1254,33 @@ class GroomingSession:
         self._proxy_cache = None
 
     def _guide_setup(self):
-        """Guide strands, their rest polylines (float64) and the material of the current config."""
+        """Guide strands, their rest vertices (float64, flat) and offsets, and the material of the
+        current config."""
         from .config import RodMaterial
 
         g, cfg = self.groom, self.config
         off = g.strand_offsets
-        rest = g.rest_points.astype(np.float64)
         guides = self._guide_strands()
+        counts = g.strand_vertex_counts()[guides]
+        starts = off[guides]
+        # Vertex indices of the guides, strand after strand (vectorised: no per-strand slices).
+        rows = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum())
+        points = g.rest_points[rows].astype(np.float64)
+        offsets = np.concatenate([[0], np.cumsum(counts)])
         material = RodMaterial(radius=cfg.radius, density=cfg.density, youngs_modulus_bend=cfg.youngs_modulus,
                                youngs_modulus_stretch=cfg.youngs_modulus)
-        return guides, [rest[off[s]:off[s + 1]] for s in guides], material
+        return guides, (points, offsets), material
+
+    @staticmethod
+    def _guide_builder(guide_rest, material):
+        """The guides' GroomBuilder (bulk :meth:`GroomBuilder.add_strands`): roots clamped to body 0
+        (the head); two bodies, the second the comb's (``COMB_BODY``), so a comb stroke needs no new
+        Model."""
+        from .builder import GroomBuilder
+
+        builder = GroomBuilder(body_count=COMB_BODY + 1)
+        builder.add_strands(guide_rest[0], guide_rest[1], material, root="clamped", body=0)
+        return builder
 
     def _ensure_built(self) -> None:
         if self._sim is not None:
@@ -1106,7 +1289,7 @@ class GroomingSession:
             return
         from types import SimpleNamespace
 
-        from .builder import GroomBuilder
+        from .colliders import CapsuleCollider
         from .config import ContactConfig, SolverADMMConfig
         from .model import _np_float
         from .skinning import SkinningConfig, SkinningLBS
@@ -1115,18 +1298,17 @@ class GroomingSession:
         t0 = time.perf_counter()
         g, cfg = self.groom, self.config
         off = g.strand_offsets
-        guides, guide_polylines, material = self._guide_setup()
-        builder = GroomBuilder()
-        for p in guide_polylines:
-            builder.add_strand(p, material, root="clamped", body=0)
-        model = builder.finalize()
-        contacts = None
-        if cfg.contacts or self.colliders:
-            # Proximity only (Sec. 5.3): no velocity-dependent margin growth.
-            contacts = ContactConfig(hair_hair=cfg.contacts, friction=cfg.friction, margin=cfg.contact_margin,
-                                     velocity_margin=0.0)
+        guides, guide_rest, material = self._guide_setup()
+        model = self._guide_builder(guide_rest, material).finalize()
+        # Proximity only (Sec. 5.3): no velocity-dependent margin growth.  The pipeline always exists:
+        # it holds the comb, an idle collider on its own body until a stroke enables it.
+        contacts = ContactConfig(hair_hair=cfg.contacts, friction=cfg.friction, margin=cfg.contact_margin,
+                                 velocity_margin=0.0)
+        comb = CapsuleCollider(p0=(0.0, 0.0, 0.0), p1=(0.0, 0.0, 0.0), radius=1.0e-3, friction=0.0, body=COMB_BODY,
+                               strands=(0, 1))
         solver = SolverADMM(model, SolverADMMConfig(iterations=cfg.iterations, mode="quasistatic", w0=cfg.w0,
-                                                    contacts=contacts), colliders=self.colliders or None)
+                                                    contacts=contacts), colliders=self.colliders + [comb])
+        solver.contacts.colliders.collider_strands[len(self.colliders)] = [0, 0]  # idle: acts on no strand
         state = model.state()
         control = model.control()
         control.gravity = tuple(cfg.gravity)
@@ -1141,6 +1323,7 @@ class GroomingSession:
         row_of = np.full(g.vertex_count, -1, dtype=np.int64)
         row_of[guide_vertex] = np.arange(guide_vertex.size)
         self._sim = SimpleNamespace(model=model, solver=solver, state=state, control=control, skin=skin,
+                                    comb_collider=len(self.colliders),
                                     guide_vertex=guide_vertex, row_of=row_of, stale=False,
                                     base_fixed=model.host["vertex_is_fixed"].copy(),
                                     base_body=model.host["vertex_body_position"].copy(), body=None,
@@ -1152,15 +1335,10 @@ class GroomingSession:
     def _update_in_place(self) -> None:
         """New rest shapes and materials, same layout: :meth:`Model.update`, ``refresh_model`` and a
         new skinning binding, all into the existing Taichi fields (no new field, no recompilation)."""
-        from .builder import GroomBuilder
-
         t0 = time.perf_counter()
         sim, g, cfg = self._sim, self.groom, self.config
-        guides, guide_polylines, material = self._guide_setup()
-        builder = GroomBuilder()
-        for p in guide_polylines:
-            builder.add_strand(p, material, root="clamped", body=0)
-        host, materials = _host_of(builder)
+        guides, guide_rest, material = self._guide_setup()
+        host, materials = _host_of(self._guide_builder(guide_rest, material))
         sim.model.update(host, materials)
         sim.solver.config.w0 = cfg.w0
         sim.solver.refresh_model()

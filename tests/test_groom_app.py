@@ -117,6 +117,38 @@ def test_pin_tool_camera_and_drawing(app):
     assert len(s.log) == n
 
 
+def test_comb_tool_sweeps_a_frictional_comb_along_the_stroke(app):
+    """The comb tool turns a mouse stroke into comb edits on the view plane (GroomingSession.comb runs the
+    solver even with the simulation off): the strand under the stroke moves right on screen with it."""
+    s = app.session
+    before = s.groom.copy()
+    app.key("4")
+    assert app.tool == "comb"
+    app.brush_radius = 0.004
+    cam = app.camera()
+    W, H = app.viewer.width, app.viewer.height
+    px, _, _ = project(s.groom.points, cam, W, H)
+    k = 2
+    v = s.groom.strand_offsets[k] + NV - 3
+    col, row = px[v]
+    app.click(col - 6.0, row)  # the stroke starts left of the strand and crosses it to the right
+    assert app.message.startswith("comb:")
+    for dx in range(2, 31, 2):
+        app.move(col - 6.0 + dx, row)
+    app.release()
+    combs = [e for e in s.log if e["action"] == "comb"]
+    assert len(combs) >= 2 and all(e["radius"] == 0.004 and e["friction"] == app.comb_friction for e in combs)
+    assert "combed" in app.message and not app.message.startswith("comb: 0 ")
+    a, b = s.groom.strand_offsets[k], s.groom.strand_offsets[k + 1]
+    after_px, _, _ = project(s.groom.points[a:b], cam, W, H)
+    assert (after_px[:, 0] - px[a:b, 0]).max() > 3.0  # pushed along the stroke (to the right, in pixels)
+    assert np.abs(after_px[:, 1] - px[a:b, 1]).max() < 0.5 * (after_px[:, 0] - px[a:b, 0]).max()
+    for _ in combs:
+        app.key("u")
+    assert np.array_equal(s.groom.points, before.points) and np.array_equal(s.groom.rest_points,
+                                                                          before.rest_points)
+
+
 def test_window_session_is_recorded_and_replays(app, tmp_path):
     """What the window does lands in the session log; ``s`` saves the groom and the log beside it, and
     the log replayed on the original groom gives the saved groom."""

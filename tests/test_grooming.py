@@ -286,7 +286,8 @@ def test_replay_of_an_editing_log_is_bitwise_and_bad_entries_are_named(tmp_path)
 
     entries = json.loads(path.read_text())
     cases = [
-        (entries[:1] + [{"action": "comb", "teeth": 3}], r"entry 1.*unknown action 'comb'"),
+        (entries[:1] + [{"action": "comb_all", "teeth": 3}], r"entry 1.*unknown action 'comb_all'"),
+        (entries[:1] + [{"action": "comb", "teeth": 3}], r"entry 1.*'comb'.*bad parameters"),
         (entries[:2] + [{"action": "scale_length", "factor": -2.0}], r"entry 2.*'scale_length'.*factor"),
         ([{"action": "select", "center": [0, 0], "radius": 0.1}], r"entry 0.*'select'.*center"),
         ([{"action": "trim", "plane_point": [0, 0, 0]}], r"entry 0.*'trim'.*plane_normal"),
@@ -458,3 +459,137 @@ def test_proxy_is_the_nearest_arc_fraction_on_the_nearest_guide():
         assert np.all((local >= 0) & (local < off[gs + 1] - off[gs]))
         best = np.abs(fg[None, :] - fk[:, None]).min(axis=1)
         np.testing.assert_allclose(np.abs(fg[local] - fk), best, atol=1e-12)
+
+
+# =========================================================================== the comb
+def hanging(ns=6, nv=11):
+    """Straight strands hanging 10 cm down from roots 1 cm apart along x (no gravity in the comb tests,
+    so an untouched strand is at rest)."""
+    return [np.c_[np.full(nv, 0.01 * i), np.linspace(0.0, -0.1, nv), np.zeros(nv)] for i in range(ns)]
+
+
+def comb_session(**kw):
+    kw.setdefault("contacts", False)
+    kw.setdefault("guide_ratio", 1.0)
+    kw.setdefault("gravity", (0.0, 0.0, 0.0))
+    kw.setdefault("autosave_every", 0)
+    return GroomingSession(hanging(), GroomingConfig(**kw))
+
+
+#: A vertical tooth (axis y, 6 cm long, radius 2 mm) between strands 0 and 1, swept 2 cm along +x
+#: (through strands 1 and 2; strand 3 stays 3 mm ahead of it), then 2 cm along +z (tangential).
+TOOTH = {"radius": 0.002, "axis": [0.0, 1.0, 0.0], "length": 0.06}
+PUSH = [[0.005, -0.06, 0.0], [0.025, -0.06, 0.0]]
+SLIDE = PUSH + [[0.025, -0.06, 0.02]]
+
+
+def test_comb_pushes_the_strands_it_passes_drags_by_friction_and_undoes():
+    """The comb is a frictional collider swept through the hair (one solver: the kernels compile once)."""
+    s = comb_session()
+    before = s.groom.copy()
+    off = before.strand_offsets
+    assert s.comb(PUSH, friction=0.3, **TOOTH) == 2
+    assert s.log[-1] == {"action": "comb", "path": PUSH, "radius": 0.002, "axis": [0.0, 1.0, 0.0], "length": 0.06,
+                         "friction": 0.3, "step": 0.001}
+    assert s.rebuild_count == 1 and s._sim.model.body_count == 2
+    d = s.groom.points.astype(np.float64) - before.points
+    for i in (1, 2):  # pushed along the sweep (+x) by about their distance to its end, 27 mm
+        x_push = d[off[i]:off[i + 1], 0]
+        assert x_push.max() > 0.6 * (0.027 - 0.01 * i), (i, x_push.max())
+        assert np.all(x_push >= -1e-6)
+        # The combed shape is the new rest pose; the clamped root edge stays bit for bit.
+        assert np.array_equal(s.groom.rest_points[off[i]:off[i] + 2], before.rest_points[off[i]:off[i] + 2])
+        assert np.array_equal(s.groom.rest_points[off[i] + 2:off[i + 1]], s.groom.points[off[i] + 2:off[i + 1]])
+    for i in (0, 3, 4, 5):  # far from the path: the same (float32 round trip of the State) and rest kept
+        assert np.abs(d[off[i]:off[i + 1]]).max() < 1e-7, i
+        assert np.array_equal(strand(s.groom, i, True), strand(before, i, True))
+    s.undo()
+    assert same_groom(s.groom, before)
+    # Friction: sliding the tooth along z over the strands it holds drags them along z only with mu > 0.
+    z = {}
+    for mu in (0.0, 0.8):
+        s.comb(SLIDE, friction=mu, **TOOTH)
+        z[mu] = [float(strand(s.groom, i)[:, 2].max()) for i in (1, 2)]
+        s.undo()
+        assert same_groom(s.groom, before)
+    assert max(abs(v) for v in z[0.0]) < 1e-6, z
+    assert z[0.8][0] > 1e-3 and z[0.8][1] > 2e-4, z
+    assert s.rebuild_count == 1  # strokes and undos update the Model in place
+
+
+def test_comb_replays_bit_for_bit_and_bad_comb_values_are_named(tmp_path):
+    s = comb_session(iterations=5)
+    s.advance(1)
+    s.comb(SLIDE, friction=0.5, **TOOTH)
+    s.select_strands([2])
+    s.scale_curl(0.5)
+    s.advance(2)
+    path = tmp_path / "session.json"
+    s.write_log(path)
+    t = comb_session(iterations=5)
+    t.replay(path)
+    assert t.log == s.log and same_groom(t.groom, s.groom)
+    assert not same_groom(t.groom, comb_session().groom)
+
+    good = {"action": "comb", "path": PUSH, **TOOTH}
+    for change, pattern in (({"radius": -0.002}, "radius"), ({"path": [[0.0, 0.0, 0.0], [float("nan"), 0.0, 0.0]]},
+                                                            "path.*non-finite.*point 1"),
+                            ({"path": [[0.0, 0.0, 0.0]]}, "path.*at least 2 points"),
+                            ({"axis": [0.0, 0.0, 0.0]}, "axis"), ({"friction": -1.0}, "friction"),
+                            ({"path": [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], "step": 1e-5}, "step")):
+        bad_file = tmp_path / "bad.json"
+        # json.dumps writes NaN as a bare NaN, which Python's JSON reader takes back.
+        bad_file.write_text("[\n" + ",\n".join(json.dumps(e) for e in [{"action": "select_all"}, {**good, **change}])
+                            + "\n]\n")
+        with pytest.raises(ValueError, match=r"entry 1 \(line 3\), action 'comb': .*" + pattern):
+            comb_session().replay(bad_file)
+
+
+# =========================================================================== bulk builder path
+def test_bulk_add_strands_gives_the_per_strand_host_arrays_bit_for_bit():
+    """GroomBuilder.add_strands (vectorised, used by the session) equals add_strand per strand."""
+    from taichi_hair.builder import GroomBuilder
+    from taichi_hair.config import RodMaterial
+    from taichi_hair.grooming import _host_of
+
+    rng = np.random.default_rng(3)
+    lines = [np.cumsum(rng.normal(size=(int(rng.integers(3, 13)), 3)) * 0.01, axis=0) for _ in range(40)]
+    lines[5] = np.c_[np.zeros(6), np.linspace(0.0, 0.05, 6), np.zeros(6)]  # a root along z: the other axis
+    lines[5] = lines[5][:, [0, 2, 1]]
+    counts = np.array([len(p) for p in lines])
+    offsets = np.r_[0, np.cumsum(counts)]
+    flat = np.concatenate(lines)
+    material = RodMaterial(radius=4e-5, youngs_modulus_bend=2e9)
+    twist = rng.normal(size=flat.shape[0])
+    directors = rng.normal(size=(len(lines), 3))
+    for options in ({}, {"twist": twist, "root_directors": directors}):
+        one = GroomBuilder(body_count=2)
+        for k, p in enumerate(lines):
+            kw = {}
+            if options:
+                kw = {"twist": twist[offsets[k]:offsets[k + 1]], "root_director": directors[k]}
+            one.add_strand(p, material, root="clamped", body=1, **kw)
+        bulk = GroomBuilder(body_count=2)
+        bulk.add_strand(lines[0], material, body=1, **({"twist": twist[:offsets[1]], "root_director": directors[0]}
+                                                       if options else {}))
+        idx = bulk.add_strands(flat[offsets[1]:], offsets[1:] - offsets[1], material, body=1,
+                               **({"twist": twist[offsets[1]:], "root_directors": directors[1:]} if options else {}))
+        assert idx.tolist() == list(range(1, len(lines))) and bulk.strand_count == one.strand_count
+        (ha, ma), (hb, mb) = _host_of(one), _host_of(bulk)
+        assert sorted(ha) == sorted(hb) and len(ma) == len(mb)
+        for key in ha:
+            assert ha[key].dtype == hb[key].dtype and np.array_equal(ha[key], hb[key]), key
+    b = GroomBuilder()
+    bad = flat.copy()
+    bad[offsets[3] + 2, 1] = np.nan
+    with pytest.raises(ValueError, match="strand 3: field 'points' has a non-finite coordinate at vertex 2"):
+        b.add_strands(bad, offsets)
+    bad = flat.copy()
+    bad[offsets[7] + 1] = bad[offsets[7]]
+    with pytest.raises(ValueError, match="strand 7: .*zero-length edge between vertices 0 and 1"):
+        b.add_strands(bad, offsets)
+    with pytest.raises(ValueError, match="strand 1: .*2 vertices"):
+        b.add_strands(flat[:5], [0, 3, 5])
+    with pytest.raises(ValueError, match="offsets"):
+        b.add_strands(flat, offsets[:-1])
+    assert b.strand_count == 0
