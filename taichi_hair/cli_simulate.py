@@ -19,6 +19,13 @@ For a file output the statistics, summary and checkpoint sit beside it: ``<name>
 solver only) are written every ``--checkpoint-every`` frames and at the end; ``--resume`` continues from
 the last one and gives the same frames, bit for bit, as a run that never stopped (and refuses a
 checkpoint made for another scene or other settings).
+
+Model no more than the scene needs (:mod:`taichi_hair.fidelity`): the run prints, and writes into the
+summary under ``model``, what the solver chose to model and to skip.  ``--equilibrium`` asks for the rest
+shape only: quasistatic steps (ADMM) until the largest displacement per step is below
+``--equilibrium-tolerance``, written as frame 1.  ``--max-error E`` (a fraction of the strand length) or
+``--budget-ms T`` (wall milliseconds per frame) picks the method and its knobs from the measured
+speed/accuracy data (``taichi-hair bench pareto``; ``--pareto-data`` reads a re-measured ``pareto.csv``).
 """
 
 from __future__ import annotations
@@ -133,6 +140,7 @@ def _atomic_text(path: str, write) -> None:
 # --------------------------------------------------------------------------- the command
 def cmd_simulate(args) -> int:
     scene = _load_scene(args)  # before ti.init: scene errors cost no start-up
+    _check_model_options(args, scene)
     out = args.out or scene.output
     if not out:
         raise CLIError("--out is required (the scene file names no [scene] output)")
@@ -163,7 +171,9 @@ def cmd_simulate(args) -> int:
 
     # Refuse a checkpoint made for another scene before anything is built or compiled.
     fingerprint = {"scene": scene.description, "arch": arch, "precision": args.precision,
-                   "dt": 1.0 / (scene.fps * scene.substeps), "solver": scene.solver, "version": 1}
+                   "dt": 1.0 / (scene.fps * scene.substeps), "solver": scene.solver, "version": 1,
+                   "choice": {"max_error": args.max_error, "budget_ms": args.budget_ms,
+                              "data": args.pareto_data}}
     fingerprint = json.loads(json.dumps(fingerprint, default=str))
     ckpt = None
     if args.resume:
@@ -182,6 +192,7 @@ def cmd_simulate(args) -> int:
             print(f"note: no checkpoint at {layout['checkpoint']}; starting from frame 0", file=sys.stderr)
     t_build = time.perf_counter()
     model = scene.build_model()
+    choice = _apply_method_choice(args, scene, model)
     dt = 1.0 / (scene.fps * scene.substeps)
     state, control = model.state(), model.control()
     control.gravity = tuple(scene.gravity)
@@ -256,6 +267,8 @@ def cmd_simulate(args) -> int:
               + (f" x {iters} iterations" if iters else "")
               + f" (set-up {t_build:.2f} s, kernel compilation {t_compile:.2f} s)"
               + (f"; resuming after frame {start}" if start else ""))
+        for line in _model_lines(solver, choice):
+            print("model: " + line)
         print(header)
 
     def checkpoint(f):
@@ -265,14 +278,21 @@ def cmd_simulate(args) -> int:
                          stats_rows, fingerprint)
 
     diverged = None
+    eq = None
     t_all = time.perf_counter()
     completed = start
     for f in range(start + 1, scene.frames + 1):
         t0 = time.perf_counter()
         try:
-            for k in range(scene.substeps):
-                set_bodies(((f - 1) * scene.substeps + k + 1) * dt)
-                solver.step(state, control, dt)
+            if args.equilibrium:
+                from .fidelity import equilibrium
+
+                eq = equilibrium(solver, state, control, args.equilibrium_tolerance, args.max_steps, dt,
+                                 callback=lambda k, d: bar.update(0, step=k, displacement=f"{d:.2e}"))
+            else:
+                for k in range(scene.substeps):
+                    set_bodies(((f - 1) * scene.substeps + k + 1) * dt)
+                    solver.step(state, control, dt)
         except SimulationDivergedError as exc:
             diverged = f"frame {f}: {exc}"
             break
@@ -292,7 +312,8 @@ def cmd_simulate(args) -> int:
         frames[f] = x
         completed = f
         write_frame_file(f)
-        if admm and args.checkpoint_every and (f % args.checkpoint_every == 0 or f == scene.frames):
+        if admm and args.checkpoint_every and not args.equilibrium and (f % args.checkpoint_every == 0
+                                                                        or f == scene.frames):
             checkpoint(f)
         if not args.quiet:
             bar.write(f"{f:5d} {row['time']:7.3f} {ms:9.1f} {row['max_speed']:12.4f} "
@@ -331,10 +352,23 @@ def cmd_simulate(args) -> int:
                    arch=arch, precision=args.precision, output=written, wall_seconds=wall, setup_seconds=t_build,
                    compile_seconds=t_compile, ms_per_frame=1e3 * wall / max(run_frames, 1), iterations=iters,
                    substeps=scene.substeps,
-                   mvertex_iterations_per_s=n * iters * scene.substeps * run_frames / max(wall, 1e-9) / 1e6,
+                   mvertex_iterations_per_s=n * (eq.iterations if eq is not None else iters * scene.substeps
+                                                 * run_frames) / max(wall, 1e-9) / 1e6,
                    peak_host_memory_mb=peak_mb, diverged=diverged,
                    load_average_1min_at_end=os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
                    cpu_count=os.cpu_count())
+    summary["model"] = dict(_model_report(solver), **({"method_choice": choice.description} if choice else {}))
+    if choice is not None:
+        summary["method_choice"] = dict(method=choice.point.method, dt=choice.point.dt,
+                                        iterations=choice.point.iterations, substeps=choice.point.substeps,
+                                        shape_method=choice.point.shape_method, stand_in=choice.stand_in,
+                                        measured_error=choice.point.error,
+                                        estimated_ms_per_frame=choice.estimated_ms_per_frame)
+    if eq is not None:
+        summary["equilibrium"] = dict(converged=eq.converged, steps=eq.steps, iterations=eq.iterations,
+                                      last_displacement_m=eq.last_displacement,
+                                      estimated_distance_m=eq.estimated_distance,
+                                      tolerance_m=args.equilibrium_tolerance)
     if with_contacts and stats_rows:
         summary["mean_contacts"] = float(np.mean([r["contacts"] for r in stats_rows]))
         summary["max_penetration_m"] = float(max(r["max_penetration_m"] for r in stats_rows))
@@ -354,7 +388,89 @@ def cmd_simulate(args) -> int:
     if diverged:
         print(f"error: simulation diverged at {diverged}; frames up to {completed} were kept", file=sys.stderr)
         return 1
+    if eq is not None:
+        if not eq.converged:
+            print(f"error: no equilibrium within {eq.steps} quasistatic steps (the last moved a vertex by "
+                  f"{eq.last_displacement:.3g} m, estimated distance left {eq.estimated_distance:.3g} m, tolerance "
+                  f"{args.equilibrium_tolerance:g} m); the last state was written", file=sys.stderr)
+            return 1
+        print(f"equilibrium after {eq.steps} quasistatic steps ({eq.iterations} iterations; last displacement "
+              f"{eq.last_displacement:.3g} m, estimated distance left {eq.estimated_distance:.3g} m)")
     return 0
+
+
+# --------------------------------------------------------------------------- model choices
+def _check_model_options(args, scene) -> None:
+    """Refuse combinations of --equilibrium / --max-error / --budget-ms that have no meaning."""
+    if args.max_error is not None and args.budget_ms is not None:
+        raise CLIError("give one of --max-error and --budget-ms, not both")
+    if args.max_error is not None and not args.max_error > 0:
+        raise CLIError(f"--max-error must be a positive fraction of the strand length, got {args.max_error:g}")
+    if args.budget_ms is not None and not args.budget_ms > 0:
+        raise CLIError(f"--budget-ms must be a positive number of milliseconds per frame, got {args.budget_ms:g}")
+    if args.pareto_data is not None and args.max_error is None and args.budget_ms is None:
+        raise CLIError("--pareto-data is read by --max-error or --budget-ms; give one of them")
+    if args.pareto_data is not None and not os.path.isfile(args.pareto_data):
+        raise CLIError(f"{args.pareto_data}: no such file (a pareto.csv written by taichi-hair bench pareto)")
+    if args.equilibrium:
+        if args.max_error is not None or args.budget_ms is not None:
+            raise CLIError("--equilibrium runs the quasistatic ADMM solver; the speed/accuracy data are for "
+                           "dynamic runs (drop --max-error/--budget-ms)")
+        if scene.solver != "admm":
+            raise CLIError(f"--equilibrium needs the admm solver (the scene uses {scene.solver!r}, which has no "
+                           "quasistatic mode)")
+        if args.resume:
+            raise CLIError("--equilibrium writes one frame; --resume does not apply")
+        if not args.equilibrium_tolerance > 0:
+            raise CLIError(f"--equilibrium-tolerance must be a positive length [m], got {args.equilibrium_tolerance:g}")
+        if args.max_steps < 1:
+            raise CLIError(f"--max-steps must be >= 1, got {args.max_steps}")
+        from dataclasses import replace
+
+        # w0 = 1: the paper's 25 converges far more slowly in the quasistatic mode (fidelity.py).
+        scene.solver_config = replace(scene.solver_config, mode="quasistatic", w0=1.0)
+        scene.frames = 1
+        scene.description = dict(scene.description, equilibrium=args.equilibrium_tolerance)
+
+
+def _apply_method_choice(args, scene, model):
+    """--max-error / --budget-ms: the measured setting for this scene, applied to ``scene`` (solver, config,
+    substeps); ``None`` without those options."""
+    if args.max_error is None and args.budget_ms is None:
+        return None
+    from .bench.pareto import load_shipped, read_csv
+    from .fidelity import choose_for_scene, solver_config_for
+
+    try:
+        points = read_csv(args.pareto_data) if args.pareto_data else load_shipped()
+    except (KeyError, ValueError, OSError) as exc:
+        raise CLIError(f"{args.pareto_data or 'shipped Pareto data'}: not a pareto.csv of taichi-hair bench pareto "
+                       f"({type(exc).__name__}: {exc})") from None
+    cfg = scene.solver_config if scene.solver == "admm" else None
+    hair_hair = cfg is not None and cfg.contacts is not None and cfg.contacts.hair_hair
+    try:
+        choice = choose_for_scene(points, model.strand_count, model.vertex_count, scene.fps, args.precision,
+                                  hair_hair=hair_hair, colliders=bool(scene.colliders), max_error=args.max_error,
+                                  budget_ms=args.budget_ms)
+    except ValueError as exc:
+        raise CLIError(f"{'--max-error' if args.max_error is not None else '--budget-ms'}: {exc}") from None
+    scene.solver_config = solver_config_for(choice, cfg)
+    scene.solver = choice.solver
+    scene.substeps = choice.substeps
+    return choice
+
+
+def _model_report(solver) -> dict:
+    if hasattr(solver, "model_report"):
+        return solver.model_report()
+    return {"solver": f"{type(solver).__name__}: no model simplification"}
+
+
+def _model_lines(solver, choice) -> list:
+    lines = [f"{k}: {v}" for k, v in _model_report(solver).items()]
+    if choice is not None:
+        lines.append(choice.description)
+    return lines
 
 
 def register(sub) -> None:
@@ -392,5 +508,21 @@ def register(sub) -> None:
                    help="folder output: format of the per-frame files (thair (default), hair, data, ply, obj, "
                         "tfx, usd)")
     s.add_argument("--profile", action="store_true", help="time each stage of Algorithm 1 (synchronises after each)")
+    s.add_argument("--equilibrium", action="store_true",
+                   help="only the rest shape: quasistatic ADMM steps until the largest displacement per step is "
+                        "below --equilibrium-tolerance; written as frame 1")
+    s.add_argument("--equilibrium-tolerance", type=float, default=1e-5, metavar="M",
+                   help="--equilibrium: estimated distance left to the equilibrium [m] (default 1e-5)")
+    s.add_argument("--max-steps", type=int, default=2000,
+                   help="--equilibrium: most quasistatic steps (default 2000)")
+    s.add_argument("--max-error", type=float, default=None, metavar="E",
+                   help="pick the cheapest method and knobs whose measured error (fraction of the strand length, "
+                        "e.g. 0.05) is within E, from the speed/accuracy data")
+    s.add_argument("--budget-ms", type=float, default=None, metavar="T",
+                   help="pick the most accurate method and knobs that measured within T wall ms per frame for "
+                        "this scene's vertex count")
+    s.add_argument("--pareto-data", default=None, metavar="CSV",
+                   help="speed/accuracy data for --max-error/--budget-ms (default: the shipped CPU "
+                        "measurements; a pareto.csv from taichi-hair bench pareto)")
     _add_common(s)
     s.set_defaults(func=cmd_simulate)

@@ -83,6 +83,7 @@ MODES = ("dynamic", "quasistatic")
 TRIDIAGONAL_METHODS = ("auto", "thomas", "pcr")
 DUAL_FRAMES = ("root", "pair", "none")
 SCHEDULES = ("auto", "stage", "strand")
+TWIST_MODES = ("auto", "solve")
 
 
 @dataclass
@@ -131,6 +132,14 @@ class ContactConfig:
             intervals of the ADMM iterations (the paper's "CT" hairball uses
             3) and once more before the final geometric correction; 0 uses
             proximity detection only [-].
+        skip_when_apart: skip the hair-hair candidate search of a step in
+            which no two strands come within reach and no strand can touch
+            itself (exact: :mod:`taichi_hair.fidelity`); the statistics
+            count the skipped steps [-].
+        skip_slow_continuous: skip a continuous-detection pass when twice
+            the largest displacement since the beginning of the step is
+            within ``margin`` (pairs out of proximity reach cannot have met;
+            :mod:`taichi_hair.fidelity`) [-].
 
     Collision weights follow the paper: W_z = m / dt~^2 with
     dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)).  For short edges of
@@ -152,6 +161,8 @@ class ContactConfig:
     continuous_detections: int = 0
     mass_splitting: str = "batch"
     relinearize_correction: bool = True
+    skip_when_apart: bool = True
+    skip_slow_continuous: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):
@@ -217,6 +228,12 @@ class SolverADMMConfig:
         contacts: :class:`ContactConfig` to enable frictional contacts
             (Sec. 4.5), or ``None`` (no hair-hair contacts; body colliders
             given to the solver still use the default ContactConfig).
+        twist: ``"auto"`` drops the twist unknowns (steps 4f-g of
+            Algorithm 1) when every strand is naturally straight, of round
+            section and free to untwist, where the twist-free frame is their
+            exact value (:mod:`taichi_hair.fidelity`; the solver's
+            ``model_choices`` says which it did and why); ``"solve"`` always
+            solves them, as the paper does.
     """
 
     iterations: int = 10
@@ -231,8 +248,11 @@ class SolverADMMConfig:
     schedule: str = "auto"
     check_finite: bool = True
     contacts: ContactConfig | None = None
+    twist: str = "auto"
 
     def __post_init__(self):
+        if self.twist not in TWIST_MODES:
+            raise ValueError(f"SolverADMMConfig.twist must be one of {TWIST_MODES}, got {self.twist!r}")
         if isinstance(self.contacts, dict):
             self.contacts = ContactConfig(**self.contacts)
         if self.contacts is not None and not isinstance(self.contacts, ContactConfig):

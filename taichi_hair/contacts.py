@@ -306,7 +306,7 @@ class ContactPipeline:
 
     def __init__(self, model, config, colliders=None):
         from .colliders import ColliderSet
-        from .fields import BoxGridFields, CCDFields, ContactFields, GridFields
+        from .fields import BoxGridFields, CCDFields, ContactFields, GridFields, StrandBoxFields
 
         self.model = model
         self.config = config
@@ -333,7 +333,14 @@ class ContactPipeline:
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
         #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
         self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
+        self.strand_boxes = StrandBoxFields(model.strand_count)
+        #: Whether the last step skipped the hair-hair search (no strands within reach), and how many did.
+        self.hair_search_skipped = False
+        self.hair_search_skip_count = 0
         self.ccd_skipped = 0
+        #: Continuous passes run or skipped, and skipped, since the pipeline was made.
+        self.ccd_pass_total = 0
+        self.ccd_skip_total = 0
         self.continuous_contacts = 0
         self.capped_queries = 0
         self.grow_events = 0
@@ -402,10 +409,17 @@ class ContactPipeline:
             sweep *= max_edge / motion
             fall *= max_edge / motion
             motion = max_edge
+        self.hair_search_skipped = False
         if cfg.hair_hair:
             proximity_boxes(m, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
-            h = self._fill_box_grid(max(max_edge, 1e-9))
-            find_candidates(m, m, x, self.vertex_radius, g, self.boxes, h, margin, sweep, fall)
+            if cfg.skip_when_apart and self._strands_apart(x):
+                # No two strands within reach and none can touch itself: nothing to search (fidelity.py).
+                g.edge_candidate_count.fill(0)
+                self.hair_search_skipped = True
+                self.hair_search_skip_count += 1
+            else:
+                h = self._fill_box_grid(max(max_edge, 1e-9))
+                find_candidates(m, m, x, self.vertex_radius, g, self.boxes, h, margin, sweep, fall)
         else:
             g.edge_candidate_count.fill(0)
         sweep, fall = body_sweep, body_fall
@@ -446,8 +460,10 @@ class ContactPipeline:
         swept_boxes(m, x0, x, self.vertex_radius, self.boxes, ccd)
         # Two edges outside each other's proximity reach approach by at most twice the largest
         # displacement: when that is within the proximity margin no impact is possible (skip the pass).
-        if 2.0 * float(ccd.max_displacement[None]) <= cfg.margin:
+        self.ccd_pass_total += 1
+        if cfg.skip_slow_continuous and 2.0 * float(ccd.max_displacement[None]) <= cfg.margin:
             self.ccd_skipped += 1
+            self.ccd_skip_total += 1
             return 0
         # Cells of the longest edge (the paper's size), widened for very fast motion so no swept box spans
         # more than ~5 cells per axis.
@@ -468,6 +484,16 @@ class ContactPipeline:
                             self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == "batch")
         self.continuous_contacts += added
         return added
+
+    def _strands_apart(self, x) -> bool:
+        """Strand-level broad phase on the edge boxes just computed (``fidelity.strands_apart``)."""
+        from .fidelity import strands_apart
+        from .grid import strand_boxes
+
+        sb = self.strand_boxes
+        strand_boxes(self.model, self.model, x, self.boxes, sb)
+        return strands_apart(sb.strand_box_lo.to_numpy(), sb.strand_box_hi.to_numpy(),
+                             sb.strand_self_clear.to_numpy())
 
     def _fill_box_grid(self, h: float) -> float:
         """Enter every edge box (already in ``self.boxes``) in the cells of size h [m] it overlaps; grow the
@@ -557,4 +583,4 @@ class ContactPipeline:
         return {"contacts": self.contact_count, "sticking": int(o[0]), "sliding": int(o[1]),
                 "separating": int(o[2]), "max_penetration_m": max(float(o[3]), 0.0),
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
-                "continuous_passes_skipped": self.ccd_skipped}
+                "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped}

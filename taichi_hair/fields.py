@@ -261,6 +261,18 @@ class BoxGridFields:
         self.entry_box_hi = ti.field(vec3, cap)
 
 
+class StrandBoxFields:
+    """Strand-level broad phase (``fidelity.strands_apart``): per-strand boxes, shape (strand_count,)."""
+
+    def __init__(self, strand_count: int):
+        s = max(1, strand_count)
+        #: Union of the strand's edge detection boxes: lower and upper corners [m] (+/-1e30 if no real edge).
+        self.strand_box_lo = ti.field(vec3, s)
+        self.strand_box_hi = ti.field(vec3, s)
+        #: 1 where no two non-adjacent edges of the strand can be within reach of each other [-].
+        self.strand_self_clear = ti.field(ti.i32, s)
+
+
 class GridFields:
     """Proximity broad and narrow phase: per-edge 18-DOPs, velocities and closest candidates.
 

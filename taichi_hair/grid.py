@@ -179,6 +179,45 @@ def proximity_boxes(edge: ti.template(), x: ti.template(), radius: ti.template()
 
 
 @ti.kernel
+def strand_boxes(strand: ti.template(), edge: ti.template(), x: ti.template(), boxes: ti.template(),
+                 out: ti.template()):
+    """Per strand: the union of its edges' detection boxes (``proximity_boxes`` first), and whether the
+    strand can touch itself.  It cannot when every edge tangent t_k makes an acute angle with the chord
+    direction d (c = min_k t_k . d > 0): along d the strand then advances monotonically, so two
+    non-adjacent edges are at least L_min c apart, and when that exceeds twice the largest box growth
+    no such pair is within reach (``fidelity.strands_apart``)."""
+    for s in strand.strand_vertex_start:
+        start = strand.strand_vertex_start[s]
+        m = strand.strand_vertex_count[s]
+        lo = vec3(1e30)
+        hi = vec3(-1e30)
+        chord = x[start + m - 1] - x[start]
+        length = chord.norm()
+        c = -1.0
+        if length > 0.0:
+            c = 1.0
+            chord /= length
+        shortest = 1e30
+        grow_max = 0.0
+        for k in range(m - 1):
+            i = start + k
+            if edge.edge_rest_length[i] > 0.0:
+                lo = ti.min(lo, boxes.edge_box_lo[i])
+                hi = ti.max(hi, boxes.edge_box_hi[i])
+                e = x[i + 1] - x[i]
+                le = e.norm()
+                shortest = ti.min(shortest, le)
+                grow_max = ti.max(grow_max, (ti.min(x[i], x[i + 1]) - boxes.edge_box_lo[i])[0])
+                if le > 0.0:
+                    c = ti.min(c, e.dot(chord) / le)
+                else:
+                    c = -1.0
+        out.strand_box_lo[s] = lo
+        out.strand_box_hi[s] = hi
+        out.strand_self_clear[s] = 1 if (c > 0.0 and shortest * c > 2.0 * (1.0 + 1e-4) * grow_max) else 0
+
+
+@ti.kernel
 def count_cells(edge: ti.template(), boxes: ti.template(), h: float):
     """Cell range and cell count of every edge's box, then the exclusive prefix sum (entry n: the total)."""
     for i in boxes.edge_cell_lo:

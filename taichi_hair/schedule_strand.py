@@ -25,6 +25,9 @@ for its strand, *all* iterations serially:
         Thomas solve          (thomas_strand,           1 right-hand side)
         theta += dtheta       (material_frame_at,       every edge)
 
+or, when the twist unknowns are dropped (``twist_free``, :mod:`taichi_hair.fidelity`),
+the last four replaced by the twist-free frames (``twist_free_strand``).
+
 A strand's working set (a few kB for tens of vertices) stays in L1/L2 cache
 across stages and iterations, and there is one launch per step instead of
 ~9 per iteration.
@@ -49,7 +52,7 @@ from .admm import (
     pair_twist_terms_at,
 )
 from .elasticity import local_elasticity_at
-from .frames import material_frame_at, reference_frame_at, reference_twist_at
+from .frames import material_frame_at, reference_frame_at, reference_twist_at, twist_free_strand
 from .tridiag import thomas_strand
 
 vec3 = ti.math.vec3
@@ -61,6 +64,7 @@ def admm_iterations_strand(
     use_q: ti.template(),
     with_reference_twist: ti.template(),
     dynamic: ti.template(),
+    twist_free: ti.template(),
     model: ti.template(),
     body_rotation: ti.template(),
     x: ti.template(),
@@ -107,15 +111,19 @@ def admm_iterations_strand(
                 for k in range(m):
                     i = start + k
                     reference_twist_at(i, model, es)
-            # (f) Twist Newton step.
-            for k in range(m):
-                i = start + k
-                pair_twist_terms_at(i, measure, model, model, model, theta, es, buf, damping_scale)
-            for k in range(m):
-                i = start + k
-                assemble_twist_at(i, dynamic, model, model, theta, buf, dt)
-            thomas_strand(start, m, buf.tri_lower, buf.tri_diag, buf.tri_upper, buf.tri_rhs1)
-            # (g) theta += dtheta, material frames.
-            for k in range(m):
-                i = start + k
-                material_frame_at(i, model, theta, es, buf.tri_rhs1)
+            if ti.static(twist_free):
+                # (f, g) replaced: the exact twist of a naturally straight round rod (none).
+                twist_free_strand(start, m, model, theta, es)
+            else:
+                # (f) Twist Newton step.
+                for k in range(m):
+                    i = start + k
+                    pair_twist_terms_at(i, measure, model, model, model, theta, es, buf, damping_scale)
+                for k in range(m):
+                    i = start + k
+                    assemble_twist_at(i, dynamic, model, model, theta, buf, dt)
+                thomas_strand(start, m, buf.tri_lower, buf.tri_diag, buf.tri_upper, buf.tri_rhs1)
+                # (g) theta += dtheta, material frames.
+                for k in range(m):
+                    i = start + k
+                    material_frame_at(i, model, theta, es, buf.tri_rhs1)

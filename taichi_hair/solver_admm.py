@@ -14,6 +14,8 @@ Per step (Sec. 4.2):
    e. x <- x + dx, update frames
    f. twist Newton step d2E/dth2 dth = -dE/dth -- ``admm.compute_pair_twist_terms`` + ``assemble_twist_system``
    g. theta <- theta + dth, update frames
+      (f-g replaced by the exact twist-free frames ``frames.update_twist_free_frames`` when
+      every rod is naturally straight and round: ``fidelity.twist_choice``)
 5. optional geometric contact correction     -- ``ContactPipeline.correct`` (projection on x itself)
 6. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
 
@@ -42,7 +44,7 @@ from .config import SolverADMMConfig
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, solve_local_elasticity
 from .errors import SimulationDivergedError
 from .fields import SolverBuffers
-from .frames import update_material_frames, update_reference_frames
+from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
 from .schedule_strand import admm_iterations_strand
 from .state import Control, State
@@ -89,6 +91,8 @@ class SolverADMM(StageTimer):
         self._diag_strain = ti.field(float, model.vertex_count)
         #: The rest State, refilled in place by ``_set_coefficients`` (rest strains).
         self._rest_state = model.state()
+        #: What the solver chose to model and why, by topic ("twist"; "contacts" with contacts), for reports.
+        self.model_choices = {}
         self._set_coefficients()
         arch = ti.lang.impl.current_cfg().arch
         gpu = arch in _GPU_ARCHS
@@ -154,14 +158,25 @@ class SolverADMM(StageTimer):
         shared = (local >= 1) & (local <= count_of_vertex - 3)
         ks = h["edge_stretch_stiffness"] * np.where(shared, 0.5, 1.0)
         f = _np_float()
-        self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
-        self.buf.pair_admm_weight.from_numpy(weight.astype(f))
-        self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
-        self.host_pair_voronoi_bend = vstar
         m.reset_state(self._rest_state)
         rest = self._rest_state
         admm.compute_strains(self.measure, m, m, rest.vertex_position, rest.edge_twist, rest,
                              self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
+        # Model no more than the scene needs (fidelity.py): the twist unknowns of straight round rods.
+        if cfg.twist == "solve":
+            self.twist_free, why = False, "twist solved (SolverADMMConfig.twist='solve')"
+        else:
+            from .fidelity import twist_choice
+
+            self.twist_free, why = twist_choice(h, self.buf.pair_rest_kappa.to_numpy())
+        self.model_choices["twist"] = why
+        if self.twist_free:
+            bend = bend.copy()
+            bend[:, 2] = 0.0  # the energy minimised over theta has no twist term
+        self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
+        self.buf.pair_admm_weight.from_numpy(weight.astype(f))
+        self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
+        self.host_pair_voronoi_bend = vstar
 
     def _continuous_iterations(self) -> set:
         """ADMM iterations (0-based) that begin with continuous-time detection: ``continuous_detections``
@@ -214,14 +229,14 @@ class SolverADMM(StageTimer):
         if not cfg.warm_start_duals:
             admm.reset_duals(b)
         t0 = self._tock("begin", t0)
-        update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist, state)
+        self._update_frames(state, control)
         t0 = self._tock("frames", t0)
 
         if self.schedule == "strand" and con is None:
             # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
-            admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, m, control.body_rotation,
-                                   state.vertex_position, state.edge_twist, state, b, g, v_air, cfg.air_viscosity,
-                                   dt, damping_scale, cfg.iterations)
+            admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
+                                   control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
+                                   v_air, cfg.air_viscosity, dt, damping_scale, cfg.iterations)
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
         elif self.schedule == "strand":
@@ -234,9 +249,9 @@ class SolverADMM(StageTimer):
                 # (b, c) z-step and lambda_z update, then (a, c-g) one iteration strand by strand.
                 con.project(state.vertex_position, b, con.config.projection_iterations)
                 t0 = self._tock("projection", t0)
-                admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, m, control.body_rotation,
-                                       state.vertex_position, state.edge_twist, state, b, g, v_air,
-                                       cfg.air_viscosity, dt, damping_scale, 1)
+                admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
+                                       control.body_rotation, state.vertex_position, state.edge_twist, state, b,
+                                       g, v_air, cfg.air_viscosity, dt, damping_scale, 1)
                 t0 = self._tock("iterations", t0)
                 self.iteration_count += 1
         else:
@@ -250,8 +265,7 @@ class SolverADMM(StageTimer):
                 con.detect_continuous(b.vertex_position_begin, state.vertex_position)
                 t0 = self._tock("continuous", t0)
             con.correct(state.vertex_position, b.vertex_position_begin, con.config.correction_iterations)
-            update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
-                                    state.edge_twist, state)
+            self._update_frames(state, control)
             t0 = self._tock("correction", t0)
         admm.end_step(dyn, state, state, b, dt)
         self.step_count += 1
@@ -290,6 +304,12 @@ class SolverADMM(StageTimer):
             update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
                                     state.edge_twist, state)
             t0 = self._tock("frames", t0)
+            if self.twist_free:
+                # (f, g) replaced by the twist of a naturally straight round rod: none (fidelity.py).
+                update_twist_free_frames(m, m, state.edge_twist, state)
+                t0 = self._tock("frames", t0)
+                self.iteration_count += 1
+                continue
             # (f, g) Twist Newton step, then material frames.
             admm.compute_pair_twist_terms(self.measure, m, m, m, state.edge_twist, state, b, damping_scale)
             admm.assemble_twist_system(dyn, m, m, state.edge_twist, b, dt)
@@ -299,6 +319,40 @@ class SolverADMM(StageTimer):
             t0 = self._tock("frames", t0)
             self.iteration_count += 1
         return t0
+
+    def _update_frames(self, state: State, control: Control) -> None:
+        """Reference (and material) frames after x changed outside the iterations; the twist-free
+        frames too when the twist unknowns are dropped."""
+        m = self.model
+        update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
+                                state.edge_twist, state)
+        if self.twist_free:
+            update_twist_free_frames(m, m, state.edge_twist, state)
+
+    def model_report(self) -> dict:
+        """What the solver modelled and skipped so far, in words, by topic (:mod:`taichi_hair.fidelity`)."""
+        rep = dict(self.model_choices)
+        rep["mode"] = ("quasistatic: inertia and damping dropped" if not self.dynamic
+                       else "dynamic (backward Euler)")
+        con = self.contacts
+        if con is None:
+            rep["contacts"] = "no contacts"
+            return rep
+        cfg = con.config
+        if cfg.hair_hair:
+            rep["hair_hair_search"] = (
+                f"skipped in {con.hair_search_skip_count} of {con.detections} steps (no two strands within reach)"
+                if cfg.skip_when_apart else f"run in every step ({con.detections}; skip_when_apart off)")
+        else:
+            rep["hair_hair_search"] = "off (ContactConfig.hair_hair = False)"
+        if cfg.continuous_detections > 0:
+            rep["continuous_detection"] = (
+                f"{cfg.continuous_detections + 1} passes per step; skipped in {con.ccd_skip_total} of "
+                f"{con.ccd_pass_total} (largest displacement within the margin)" if cfg.skip_slow_continuous
+                else f"{cfg.continuous_detections + 1} passes per step, none skipped (skip_slow_continuous off)")
+        else:
+            rep["continuous_detection"] = "off (proximity detection only)"
+        return rep
 
     def check_finite(self, state: State) -> None:
         """Raise SimulationDivergedError (after restoring the begin-of-step state) on NaN/inf."""
