@@ -16,3 +16,20 @@ def segment_distance(p0, p1, q0, q1) -> float:
     elif t > 1:
         t, s = 1.0, np.clip((b - c) / a, 0, 1)
     return float(np.linalg.norm(p0 + s * d1 - q0 - t * d2))
+
+
+def segment_distances(p0, p1, q0, q1) -> np.ndarray:
+    """:func:`segment_distance` for many segment pairs at once: arrays of shape (..., 3), the same
+    formulas element by element (tests check the two agree), result of shape (...)."""
+    p0, p1, q0, q1 = (np.asarray(v, np.float64) for v in (p0, p1, q0, q1))
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e, f = (np.einsum("...j,...j->...", u, w) for u, w in ((d1, d1), (d2, d2), (d2, r)))
+    c, b = np.einsum("...j,...j->...", d1, r), np.einsum("...j,...j->...", d1, d2)
+    den = a * e - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(den > 1e-12 * a * e, np.clip((b * f - c * e) / den, 0, 1), 0.0)
+    t = (b * s + f) / e
+    low, high = t < 0, t > 1
+    s = np.where(low, np.clip(-c / a, 0, 1), np.where(high, np.clip((b - c) / a, 0, 1), s))
+    t = np.clip(t, 0.0, 1.0)
+    return np.linalg.norm(p0 + s[..., None] * d1 - q0 - t[..., None] * d2, axis=-1)
