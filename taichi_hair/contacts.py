@@ -412,7 +412,7 @@ class ContactPipeline:
         self.hair_search_skipped = False
         if cfg.hair_hair:
             proximity_boxes(m, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
-            if cfg.skip_when_apart and self._strands_apart(x):
+            if cfg.skip_when_apart and self._strands_apart(x, margin, sweep, fall):
                 # No two strands within reach and none can touch itself: nothing to search (fidelity.py).
                 g.edge_candidate_count.fill(0)
                 self.hair_search_skipped = True
@@ -485,13 +485,13 @@ class ContactPipeline:
         self.continuous_contacts += added
         return added
 
-    def _strands_apart(self, x) -> bool:
+    def _strands_apart(self, x, margin: float, sweep: float, fall: float) -> bool:
         """Strand-level broad phase on the edge boxes just computed (``fidelity.strands_apart``)."""
         from .fidelity import strands_apart
         from .grid import strand_boxes
 
         sb = self.strand_boxes
-        strand_boxes(self.model, self.model, x, self.boxes, sb)
+        strand_boxes(self.model, self.model, x, self.vertex_radius, self.grid, self.boxes, sb, margin, sweep, fall)
         return strands_apart(sb.strand_box_lo.to_numpy(), sb.strand_box_hi.to_numpy(),
                              sb.strand_self_clear.to_numpy())
 

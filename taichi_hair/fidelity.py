@@ -18,13 +18,16 @@ full model, which is how the tests measure what it changes (``tests/test_fidelit
   of the tests.  ``twist = "solve"`` keeps the paper's unknowns.
 * **Hair-hair detection skipped** (``ContactConfig.skip_when_apart``, default on) in a step where
   no two strands come within reach (strand boxes: the union of the edges' detection boxes, which
-  include the velocity reach) and no strand can touch itself (its total turning is below 90 degrees
-  and its shortest edge, times the cosine of that turning, is longer than twice its edges' reach).
+  include the velocity reach) and no strand can touch itself (every edge makes an acute angle with
+  the root-to-tip chord, and the shortest edge times the cosine of the largest such angle exceeds the
+  reach of two of the strand's edges: ``grid.strand_boxes``).
   Exact: the full search would find no pair either (bit-identical results, tested).
 * **Continuous detection skipped** (``ContactConfig.skip_slow_continuous``, default on) in a pass where
   twice the largest vertex displacement since the beginning of the step is within the proximity
-  margin: two edges that were out of proximity reach cannot then have met.  The pass could still
-  add impacts between pairs already in contact; the difference is measured in the tests.
+  margin (so a pass runs only when some vertex moved more than half the margin: one hair radius with
+  the default margin of 0.1 mm and radius of 0.05 mm): two edges that were out of proximity reach cannot
+  then have met.  The pass could still add impacts between pairs already in contact; the difference is
+  measured in the tests (none in the measured scene).
 * **Quasistatic stepping when only the equilibrium is asked for** (``simulate SCENE --equilibrium``,
   :func:`equilibrium`): inertia and damping dropped; steps until the estimated distance to the
   equilibrium is below a tolerance.  The constraint weight scale is w0 = 1 there (the grooming tool's
@@ -94,12 +97,13 @@ def twist_choice(host: dict, rest_kappa: np.ndarray) -> tuple[bool, str]:
 
 # --------------------------------------------------------------------------- contacts
 def strands_apart(box_lo: np.ndarray, box_hi: np.ndarray, self_clear: np.ndarray,
-                  max_pairs_per_strand: int = 8) -> bool:
+                  max_pairs: int = 2_000_000) -> bool:
     """True when no two strand boxes overlap and no strand can touch itself.
 
-    Sweep and prune on x (sorted box starts), then the y and z overlap of the remaining pairs.  When the
-    x sweep leaves more than ``max_pairs_per_strand`` pairs per strand the strands are taken to be
-    within reach without testing further (a dense groom: the full search runs anyway).
+    Sweep and prune along the axis on which the box centres spread most (sorted box starts), then the
+    overlap on the other two axes of the remaining pairs.  When the sweep leaves more than ``max_pairs``
+    pairs the strands are taken to be within reach without testing further (a dense groom: the full
+    search runs anyway).
 
     Args:
         box_lo, box_hi: strand boxes [m], shape (strand_count, 3); a strand with no real edge has
@@ -113,19 +117,25 @@ def strands_apart(box_lo: np.ndarray, box_hi: np.ndarray, self_clear: np.ndarray
     s = lo.shape[0]
     if s < 2:
         return True
-    order = np.argsort(lo[:, 0], kind="stable")
+    real = lo[:, 0] <= hi[:, 0]
+    if real.sum() < 2:
+        return True
+    centre = 0.5 * (lo[real] + hi[real])
+    axis = int(np.argmax(centre.max(axis=0) - centre.min(axis=0)))
+    others = [k for k in range(3) if k != axis]
+    order = np.argsort(lo[:, axis], kind="stable")
     lo, hi = lo[order], hi[order]
-    end = np.searchsorted(lo[:, 0], hi[:, 0], side="right")
+    end = np.searchsorted(lo[:, axis], hi[:, axis], side="right")
     counts = np.maximum(end - np.arange(s) - 1, 0)
     total = int(counts.sum())
     if total == 0:
         return True
-    if total > max_pairs_per_strand * s:
+    if total > max_pairs:
         return False
     a = np.repeat(np.arange(s), counts)
     start = np.repeat(np.cumsum(counts) - counts, counts)
     b = a + 1 + (np.arange(total) - start)
-    overlap = np.all((lo[a, 1:] <= hi[b, 1:]) & (lo[b, 1:] <= hi[a, 1:]), axis=1)
+    overlap = np.all((lo[a][:, others] <= hi[b][:, others]) & (lo[b][:, others] <= hi[a][:, others]), axis=1)
     return not bool(overlap.any())
 
 

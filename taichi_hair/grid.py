@@ -179,13 +179,18 @@ def proximity_boxes(edge: ti.template(), x: ti.template(), radius: ti.template()
 
 
 @ti.kernel
-def strand_boxes(strand: ti.template(), edge: ti.template(), x: ti.template(), boxes: ti.template(),
-                 out: ti.template()):
+def strand_boxes(strand: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
+                 grid: ti.template(), boxes: ti.template(), out: ti.template(), margin: float, sweep: float,
+                 fall: float):
     """Per strand: the union of its edges' detection boxes (``proximity_boxes`` first), and whether the
-    strand can touch itself.  It cannot when every edge tangent t_k makes an acute angle with the chord
-    direction d (c = min_k t_k . d > 0): along d the strand then advances monotonically, so two
-    non-adjacent edges are at least L_min c apart, and when that exceeds twice the largest box growth
-    no such pair is within reach (``fidelity.strands_apart``)."""
+    strand can touch itself (``fidelity.strands_apart``).
+
+    It cannot when every edge tangent t_k makes an acute angle with the chord direction d
+    (c = min_k t_k . d > 0): along d the strand then advances monotonically, so two non-adjacent edges
+    are at least L_min c apart, and when that exceeds the largest reach of two of its edges in
+    ``find_candidates``, bounded by 2 r_max + margin + sweep (2 max_e |v_e - v_mean| + 2 max spread) + fall
+    (edges of one strand moving together need little reach), no such pair is a candidate.
+    """
     for s in strand.strand_vertex_start:
         start = strand.strand_vertex_start[s]
         m = strand.strand_vertex_count[s]
@@ -198,7 +203,10 @@ def strand_boxes(strand: ti.template(), edge: ti.template(), x: ti.template(), b
             c = 1.0
             chord /= length
         shortest = 1e30
-        grow_max = 0.0
+        r_max = 0.0
+        spread_max = 0.0
+        v_sum = vec3(0.0)
+        n_real = 0
         for k in range(m - 1):
             i = start + k
             if edge.edge_rest_length[i] > 0.0:
@@ -207,14 +215,25 @@ def strand_boxes(strand: ti.template(), edge: ti.template(), x: ti.template(), b
                 e = x[i + 1] - x[i]
                 le = e.norm()
                 shortest = ti.min(shortest, le)
-                grow_max = ti.max(grow_max, (ti.min(x[i], x[i + 1]) - boxes.edge_box_lo[i])[0])
+                r_max = ti.max(r_max, radius[i])
+                spread_max = ti.max(spread_max, grid.edge_velocity_spread[i])
+                v_sum += grid.edge_velocity[i]
+                n_real += 1
                 if le > 0.0:
                     c = ti.min(c, e.dot(chord) / le)
                 else:
                     c = -1.0
+        dev = 0.0
+        if n_real > 0:
+            v_mean = v_sum / n_real
+            for k in range(m - 1):
+                i = start + k
+                if edge.edge_rest_length[i] > 0.0:
+                    dev = ti.max(dev, (grid.edge_velocity[i] - v_mean).norm())
+        reach = 2.0 * r_max + margin + sweep * (2.0 * dev + 2.0 * spread_max) + fall
         out.strand_box_lo[s] = lo
         out.strand_box_hi[s] = hi
-        out.strand_self_clear[s] = 1 if (c > 0.0 and shortest * c > 2.0 * (1.0 + 1e-4) * grow_max) else 0
+        out.strand_self_clear[s] = 1 if (c > 0.0 and shortest * c > (1.0 + 1e-4) * reach) else 0
 
 
 @ti.kernel
