@@ -30,6 +30,17 @@ def _transport(u: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     return c * u + np.cross(b, u) + (np.dot(b, u) / (1.0 + c)) * b
 
 
+def _points_array(points, where: str, rows: str) -> np.ndarray:
+    """``points`` as a float64 (rows, 3) array, or a ValueError naming ``where`` and the field."""
+    try:
+        pts = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: field 'points' is not a numeric array ({exc})") from None
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"{where}: field 'points' must have shape ({rows}, 3), got {pts.shape}")
+    return pts
+
+
 class GroomBuilder:
     """Collects strands, validates them, and builds a :class:`Model`.
 
@@ -105,12 +116,7 @@ class GroomBuilder:
         """
         idx = len(self._points)
         where = f"strand {idx}"
-        try:
-            pts = np.array(points, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{where}: field 'points' is not a numeric array ({exc})") from None
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise ValueError(f"{where}: field 'points' must have shape (m, 3), got {pts.shape}")
+        pts = _points_array(points, where, "m")
         m = pts.shape[0]
         if m < 3:
             raise ValueError(f"{where}: field 'points' has {m} vertices; a strand needs at least 3")
@@ -173,12 +179,7 @@ class GroomBuilder:
         """
         first = self._strand_count
         where = f"strands {first}..: add_strands"
-        try:
-            pts = np.array(points, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{where}: field 'points' is not a numeric array ({exc})") from None
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise ValueError(f"{where}: field 'points' must have shape (n, 3), got {pts.shape}")
+        pts = _points_array(points, where, "n")
         try:
             off = np.asarray(offsets).astype(np.int64, casting="safe").reshape(-1)
         except (TypeError, ValueError):
