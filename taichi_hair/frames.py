@@ -115,33 +115,38 @@ def update_material_frames(edge: ti.template(), theta: ti.template(), es: ti.tem
 
 
 @ti.func
-def twist_free_strand(start: ti.i32, count: ti.i32, edge: ti.template(), theta: ti.template(), es: ti.template()):
+def twist_free_strand(start: ti.i32, count: ti.i32, edge: ti.template(), theta: ti.template(), es: ti.template(),
+                      with_theta: ti.template()):
     """Material frames of one strand with no twist: each free edge's frame is the previous edge's
-    parallel-transported along the centerline (the space-parallel, "Bishop", frame), and theta is the
-    angle of that frame from the edge's reference director, kept continuous in time.
+    parallel-transported along the centerline (the space-parallel, "Bishop", frame); with
+    ``with_theta`` (compile-time) also theta, the angle of that frame from the edge's reference
+    director, kept continuous in time (once per step is enough: nothing reads theta inside the
+    iterations when the twist is dropped).
 
     This is the exact minimiser of the twisting energy over theta when the rest twist and curvature are
     zero, the section is round and nothing holds the tip's twist: every pair's twist is then zero, the
     bending energy does not depend on the frame, and the twist unknowns carry no information
-    (:func:`taichi_hair.fidelity.twist_choice` decides when that holds).  Needs the tangents and
-    reference directors up to date; edges are visited root to tip, so it runs serially per strand.
+    (:func:`taichi_hair.fidelity.twist_choice` decides when that holds).  Needs the tangents up to date
+    (and the reference directors for theta); edges are visited root to tip, serially per strand.
     """
     for k in range(1, count - 1):
         i = start + k
         if edge.edge_is_fixed[i] == 0 and edge.edge_rest_length[i] > 0.0:
-            t_prev = es.edge_tangent[i - 1]
             t_cur = es.edge_tangent[i]
-            m1 = parallel_transport(es.edge_material_d1[i - 1], t_prev, t_cur)
-            angle = signed_angle(es.edge_reference_director[i], m1, t_cur)
-            old = theta[i]
-            theta[i] = old + wrap_angle(angle - old)
-            m1n, m2n = material_frame(es.edge_reference_director[i], t_cur, theta[i])
-            es.edge_material_d1[i] = m1n
-            es.edge_material_d2[i] = m2n
+            m1 = parallel_transport(es.edge_material_d1[i - 1], es.edge_tangent[i - 1], t_cur)
+            m1 = (m1 - m1.dot(t_cur) * t_cur).normalized()
+            if ti.static(with_theta):
+                angle = signed_angle(es.edge_reference_director[i], m1, t_cur)
+                old = theta[i]
+                theta[i] = old + wrap_angle(angle - old)
+            es.edge_material_d1[i] = m1
+            es.edge_material_d2[i] = t_cur.cross(m1)  # = -sin d1 + cos d2 of material_frame
 
 
 @ti.kernel
-def update_twist_free_frames(strand: ti.template(), edge: ti.template(), theta: ti.template(), es: ti.template()):
+def update_twist_free_frames(strand: ti.template(), edge: ti.template(), theta: ti.template(), es: ti.template(),
+                             with_theta: ti.template()):
     """:func:`twist_free_strand` for every strand (strands in parallel)."""
     for s in strand.strand_vertex_start:
-        twist_free_strand(strand.strand_vertex_start[s], strand.strand_vertex_count[s], edge, theta, es)
+        twist_free_strand(strand.strand_vertex_start[s], strand.strand_vertex_count[s], edge, theta, es,
+                          with_theta)

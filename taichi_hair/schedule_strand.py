@@ -113,7 +113,7 @@ def admm_iterations_strand(
                     reference_twist_at(i, model, es)
             if ti.static(twist_free):
                 # (f, g) replaced: the exact twist of a naturally straight round rod (none).
-                twist_free_strand(start, m, model, theta, es)
+                twist_free_strand(start, m, model, theta, es, False)
             else:
                 # (f) Twist Newton step.
                 for k in range(m):

@@ -267,6 +267,9 @@ class SolverADMM(StageTimer):
             con.correct(state.vertex_position, b.vertex_position_begin, con.config.correction_iterations)
             self._update_frames(state, control)
             t0 = self._tock("correction", t0)
+        if self.twist_free:
+            # theta of the twist-free frames, once per step (the iterations only need the frames).
+            update_twist_free_frames(m, m, state.edge_twist, state, True)
         admm.end_step(dyn, state, state, b, dt)
         self.step_count += 1
         if cfg.check_finite:
@@ -306,7 +309,7 @@ class SolverADMM(StageTimer):
             t0 = self._tock("frames", t0)
             if self.twist_free:
                 # (f, g) replaced by the twist of a naturally straight round rod: none (fidelity.py).
-                update_twist_free_frames(m, m, state.edge_twist, state)
+                update_twist_free_frames(m, m, state.edge_twist, state, False)
                 t0 = self._tock("frames", t0)
                 self.iteration_count += 1
                 continue
@@ -327,7 +330,7 @@ class SolverADMM(StageTimer):
         update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
                                 state.edge_twist, state)
         if self.twist_free:
-            update_twist_free_frames(m, m, state.edge_twist, state)
+            update_twist_free_frames(m, m, state.edge_twist, state, False)
 
     def model_report(self) -> dict:
         """What the solver modelled and skipped so far, in words, by topic (:mod:`taichi_hair.fidelity`)."""
