@@ -30,14 +30,15 @@ def _transport(u: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     return c * u + np.cross(b, u) + (np.dot(b, u) / (1.0 + c)) * b
 
 
-def _points_array(points, where: str, rows: str) -> np.ndarray:
-    """``points`` as a float64 (rows, 3) array, or a ValueError naming ``where`` and the field."""
+def points_array(points, what: str, rows: str = "n") -> np.ndarray:
+    """``points`` as a float64 (rows, 3) array, or a ValueError starting with ``what`` (e.g.
+    "strand 3: field 'points'")."""
     try:
         pts = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{where}: field 'points' is not a numeric array ({exc})") from None
+        raise ValueError(f"{what} is not a numeric array ({exc})") from None
     if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"{where}: field 'points' must have shape ({rows}, 3), got {pts.shape}")
+        raise ValueError(f"{what} must have shape ({rows}, 3), got {pts.shape}")
     return pts
 
 
@@ -116,7 +117,7 @@ class GroomBuilder:
         """
         idx = len(self._points)
         where = f"strand {idx}"
-        pts = _points_array(points, where, "m")
+        pts = points_array(points, f"{where}: field 'points'", "m")
         m = pts.shape[0]
         if m < 3:
             raise ValueError(f"{where}: field 'points' has {m} vertices; a strand needs at least 3")
@@ -179,7 +180,7 @@ class GroomBuilder:
         """
         first = self._strand_count
         where = f"strands {first}..: add_strands"
-        pts = _points_array(points, where, "n")
+        pts = points_array(points, f"{where}: field 'points'")
         try:
             off = np.asarray(offsets).astype(np.int64, casting="safe").reshape(-1)
         except (TypeError, ValueError):

@@ -58,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from .builder import GroomBuilder
+from .builder import GroomBuilder, points_array
 from .config import RodMaterial
 from .model import Model, _np_float
 from .state import Control, State
@@ -183,12 +183,7 @@ def build_guides(strands, materials=None, config: SkinningConfig | None = None, 
 
 
 def _as_points(a, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} is not a numeric array ({exc})") from None
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (n, 3), got {arr.shape}")
+    arr = points_array(a, name)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} has a non-finite coordinate")
     return arr
