@@ -197,13 +197,7 @@ def _as_polylines(strands, name: str) -> list:
         out = []
         try:
             for i, p in enumerate(strands):
-                try:
-                    a = np.asarray(p, dtype=np.float64)
-                except (TypeError, ValueError) as exc:
-                    raise ValueError(f"{name}[{i}] is not a numeric array ({exc})") from None
-                if a.ndim != 2 or a.shape[1] != 3:
-                    raise ValueError(f"{name}[{i}] must have shape (m, 3), got {a.shape}")
-                out.append(a)
+                out.append(points_array(p, f"{name}[{i}]", "m"))
         except TypeError:
             raise ValueError(f"{name} must be a sequence of (m, 3) polylines") from None
     if not out:

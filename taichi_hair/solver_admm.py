@@ -310,15 +310,13 @@ class SolverADMM(StageTimer):
             if self.twist_free:
                 # (f, g) replaced by the twist of a naturally straight round rod: none (fidelity.py).
                 update_twist_free_frames(m, m, state.edge_twist, state, False)
-                t0 = self._tock("frames", t0)
-                self.iteration_count += 1
-                continue
-            # (f, g) Twist Newton step, then material frames.
-            admm.compute_pair_twist_terms(self.measure, m, m, m, state.edge_twist, state, b, damping_scale)
-            admm.assemble_twist_system(dyn, m, m, state.edge_twist, b, dt)
-            self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs1)
-            t0 = self._tock("twist", t0)
-            update_material_frames(m, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
+            else:
+                # (f, g) Twist Newton step, then material frames.
+                admm.compute_pair_twist_terms(self.measure, m, m, m, state.edge_twist, state, b, damping_scale)
+                admm.assemble_twist_system(dyn, m, m, state.edge_twist, b, dt)
+                self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs1)
+                t0 = self._tock("twist", t0)
+                update_material_frames(m, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
             t0 = self._tock("frames", t0)
             self.iteration_count += 1
         return t0
