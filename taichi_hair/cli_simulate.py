@@ -26,6 +26,15 @@ shape only: quasistatic steps (ADMM) until the largest displacement per step is 
 ``--equilibrium-tolerance``, written as frame 1.  ``--max-error E`` (a fraction of the strand length) or
 ``--budget-ms T`` (wall milliseconds per frame) picks the method and its knobs from the measured
 speed/accuracy data (``taichi-hair bench pareto``; ``--pareto-data`` reads a re-measured ``pareto.csv``).
+
+Every run measures its own quality (:mod:`taichi_hair.quality`, any solver): per frame, ``stats.csv`` has the
+edge strain p50/p99/max, the penetration p99/max of free vertices into each body's true surface (exact
+triangle distance and winding number for meshes), the vertices deeper than 0.5 mm inside a body, the largest
+vertex speed and, when the ADMM solver reports them, its hair-hair penetration figures; ``summary.json`` has
+the worst frame of each under ``quality`` and whether the run came to rest (``--equilibrium``: converged;
+otherwise: no vertex faster than 1 cm/s in the last frame).  A run whose p99 strain passes 5 % or that
+leaves vertices inside a body ends with a ``warning:`` line naming the worst strand; ``--strict`` makes it
+exit with status 3.  Exit status: 0 ok, 1 diverged (or no equilibrium), 2 bad input, 3 ``--strict`` failure.
 """
 
 from __future__ import annotations
@@ -138,8 +147,25 @@ def _atomic_text(path: str, write) -> None:
 
 
 # --------------------------------------------------------------------------- the command
+def _load_scene_reporting(args):
+    """The scene, with every warning raised while reading it (units of the groom, a mesh with holes,
+    skipped strands) printed as one ``warning:`` line on stderr and returned for the summary."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = _load_scene(args)
+    lines = []
+    for w in caught:
+        text = str(w.message)
+        if text not in lines:
+            lines.append(text)
+            print(f"warning: {text}", file=sys.stderr)
+    return scene, lines
+
+
 def cmd_simulate(args) -> int:
-    scene = _load_scene(args)  # before ti.init: scene errors cost no start-up
+    scene, load_warnings = _load_scene_reporting(args)  # before ti.init: scene errors cost no start-up
     _check_model_options(args, scene)
     out = args.out or scene.output
     if not out:
@@ -207,9 +233,13 @@ def cmd_simulate(args) -> int:
     set_bodies(0.0)
     # Compile every kernel on the real state (kernels are specialised per field), then restore it.
     t_compile = time.perf_counter()
+    diverged = None
     if admm:
         snapshot = state.to_numpy()
-        solver.step(state, control, dt)
+        try:
+            solver.step(state, control, dt)
+        except SimulationDivergedError as exc:
+            diverged = f"frame 1: {exc}"
         state.load(snapshot)
         solver.reset_duals()
         solver.step_count = 0
@@ -254,7 +284,9 @@ def cmd_simulate(args) -> int:
     mass = model.host["vertex_mass"]
     tips = model.host["strand_vertex_start"] + model.host["strand_vertex_count"] - 1
     header = f"{'frame':>5} {'time s':>7} {'ms/frame':>9} {'max |v| m/s':>12} {'max stretch %':>13} " \
-             f"{'mean tip y m':>12} {'kinetic J':>11}"
+             f"{'p99 strain %':>12} {'mean tip y m':>12} {'kinetic J':>11}"
+    if scene.colliders:
+        header += f" {'inside':>7} {'max depth mm':>12}"
     if with_contacts:
         header += f" {'contacts':>9} {'stick':>7} {'slide':>7} {'max pen. um':>11}"
     from .progress import Progress
@@ -277,11 +309,10 @@ def cmd_simulate(args) -> int:
         write_checkpoint(layout["checkpoint"], state.to_numpy(), solver.checkpoint(), f, frames[:f + 1],
                          stats_rows, fingerprint)
 
-    diverged = None
     eq = None
     t_all = time.perf_counter()
     completed = start
-    for f in range(start + 1, scene.frames + 1):
+    for f in range(start + 1, scene.frames + 1 if diverged is None else start + 1):
         t0 = time.perf_counter()
         try:
             if args.equilibrium:
@@ -308,6 +339,7 @@ def cmd_simulate(args) -> int:
             cs = solver.contact_stats
             row.update(contacts=int(cs["contacts"]), sticking=int(cs["sticking"]), sliding=int(cs["sliding"]),
                        max_penetration_m=float(cs["max_penetration_m"]))
+        row.update(_frame_quality(model, scene, control, x, v, getattr(solver, "contact_stats", None)))
         stats_rows.append(row)
         frames[f] = x
         completed = f
@@ -317,10 +349,14 @@ def cmd_simulate(args) -> int:
             checkpoint(f)
         if not args.quiet:
             bar.write(f"{f:5d} {row['time']:7.3f} {ms:9.1f} {row['max_speed']:12.4f} "
-                      f"{row['max_stretch_percent']:13.4f} {row['mean_tip_y']:12.5f} {row['kinetic']:11.3e}"
+                      f"{row['max_stretch_percent']:13.4f} {100 * row['strain_p99']:12.4f} "
+                      f"{row['mean_tip_y']:12.5f} {row['kinetic']:11.3e}"
+                      + (f" {row['vertices_inside']:7d} {1e3 * row['body_penetration_max_m']:12.3f}"
+                         if scene.colliders else "")
                       + (f" {row['contacts']:9d} {row['sticking']:7d} {row['sliding']:7d} "
                          f"{1e6 * row['max_penetration_m']:11.2f}" if with_contacts else ""))
-        bar.update(f, **({"contacts": row["contacts"]} if with_contacts else {}))
+        bar.update(f, **{"p99 strain %": f"{100 * row['strain_p99']:.2f}"},
+                   **({"contacts": row["contacts"]} if with_contacts else {}))
     bar.close()
     wall = time.perf_counter() - t_all
     run_frames = completed - start
@@ -339,8 +375,8 @@ def cmd_simulate(args) -> int:
                    format="usd" if layout["kind"] == "usd" else "thair")
 
     def write_stats(fh):
-        keys = list(stats_rows[0].keys()) if stats_rows else ["frame"]
-        w = csv.DictWriter(fh, fieldnames=keys)
+        keys = list(dict.fromkeys(k for r in stats_rows for k in r)) if stats_rows else ["frame"]
+        w = csv.DictWriter(fh, fieldnames=keys, restval="")
         w.writeheader()
         w.writerows(stats_rows)
 
@@ -372,6 +408,8 @@ def cmd_simulate(args) -> int:
     if with_contacts and stats_rows:
         summary["mean_contacts"] = float(np.mean([r["contacts"] for r in stats_rows]))
         summary["max_penetration_m"] = float(max(r["max_penetration_m"] for r in stats_rows))
+    summary["quality"] = _run_quality(stats_rows, eq)
+    summary["warnings"] = load_warnings
     if args.profile and not hasattr(solver, "stage_seconds"):
         print(f"note: --profile: solver {scene.solver!r} has no stage timers", file=sys.stderr)
     elif args.profile:
@@ -387,7 +425,12 @@ def cmd_simulate(args) -> int:
           + (f", mean contacts {summary['mean_contacts']:.0f}" if "mean_contacts" in summary else "") + ")")
     if diverged:
         print(f"error: simulation diverged at {diverged}; frames up to {completed} were kept", file=sys.stderr)
+        if completed <= 1:
+            print(f"note: {_groom_size_note(scene, model)}", file=sys.stderr)
         return 1
+    failed = _quality_lines(summary["quality"])
+    for line in failed:
+        print(f"warning: {line}", file=sys.stderr)
     if eq is not None:
         if not eq.converged:
             print(f"error: no equilibrium within {eq.steps} quasistatic steps (the last moved a vertex by "
@@ -396,7 +439,82 @@ def cmd_simulate(args) -> int:
             return 1
         print(f"equilibrium after {eq.steps} quasistatic steps ({eq.iterations} iterations; last displacement "
               f"{eq.last_displacement:.3g} m, estimated distance left {eq.estimated_distance:.3g} m)")
+    if failed and args.strict:
+        print(f"error: --strict: {'; '.join(failed)}", file=sys.stderr)
+        return 3
     return 0
+
+
+# --------------------------------------------------------------------------- quality (taichi_hair.quality)
+def _frame_quality(model, scene, control, x, v, contact_stats) -> dict:
+    """This frame's figures of :func:`taichi_hair.quality.frame_quality`, as stats.csv columns."""
+    from .quality import frame_quality
+
+    rot = control.body_rotation.to_numpy() if scene.colliders else None
+    tr = control.body_translation.to_numpy() if scene.colliders else None
+    q = frame_quality(x, v, model.host, scene.colliders, rot, tr, contact_stats)
+    q.pop("max_speed_m_s")  # the row has it as max_speed
+    return q
+
+
+def _run_quality(rows, eq) -> dict:
+    """The run's quality for summary.json: the worst frame of each figure and the last frame's rest."""
+    from .quality import HAIR_KEYS, INSIDE_TOLERANCE_M, REST_SPEED_M_S, STRAIN_WARNING
+
+    rows = [r for r in rows if "strain_p99" in r]
+    if not rows:
+        return {}
+    worst = max(rows, key=lambda r: r["strain_p99"])
+    q = dict(strain_warning=STRAIN_WARNING, inside_tolerance_m=INSIDE_TOLERANCE_M,
+             strain_p50_max=max(r["strain_p50"] for r in rows), strain_p99_max=worst["strain_p99"],
+             strain_p99_worst_frame=worst["frame"], strain_max=max(r["strain_max"] for r in rows),
+             strain_worst_strand=worst["strain_worst_strand"], strain_p99_last=rows[-1]["strain_p99"])
+    if "vertices_inside" in rows[-1]:
+        deep = max(rows, key=lambda r: (r["vertices_inside"], r["body_penetration_max_m"]))
+        q.update(body_penetration_p99_max_m=max(r["body_penetration_p99_m"] for r in rows),
+                 body_penetration_max_m=max(r["body_penetration_max_m"] for r in rows),
+                 vertices_inside_max=deep["vertices_inside"], vertices_inside_worst_frame=deep["frame"],
+                 penetration_worst_strand=deep["penetration_worst_strand"],
+                 vertices_inside_last=rows[-1]["vertices_inside"])
+    for key in HAIR_KEYS:
+        vals = [r[key] for r in rows if r.get(key) is not None]
+        if vals:
+            q[key + "_max"] = max(vals)
+    last = rows[-1]["max_speed"]
+    if eq is not None:
+        q.update(rest_asked=True, came_to_rest=bool(eq.converged), rest_criterion="--equilibrium-tolerance")
+    else:
+        q.update(rest_asked=False, came_to_rest=bool(last < REST_SPEED_M_S),
+                 rest_criterion=f"max vertex speed in the last frame < {REST_SPEED_M_S:g} m/s")
+    q["last_frame_max_speed_m_s"] = last
+    return q
+
+
+def _quality_lines(q) -> list:
+    """The run's failed quality figures, one line each (strain above 5 %, vertices left inside a body)."""
+    lines = []
+    if not q:
+        return lines
+    if q["strain_p99_max"] > q["strain_warning"]:
+        lines.append(f"p99 edge strain reached {100 * q['strain_p99_max']:.2f} % at frame "
+                     f"{q['strain_p99_worst_frame']} (above {100 * q['strain_warning']:g} %; worst strand "
+                     f"{q['strain_worst_strand']}, max {100 * q['strain_max']:.2f} %)")
+    if q.get("vertices_inside_max", 0) > 0:
+        lines.append(f"{q['vertices_inside_max']} vertices deeper than {1e3 * q['inside_tolerance_m']:g} mm "
+                     f"inside a body at frame {q['vertices_inside_worst_frame']} (worst strand "
+                     f"{q['penetration_worst_strand']}, deepest {1e3 * q['body_penetration_max_m']:.2f} mm)")
+    return lines
+
+
+def _groom_size_note(scene, model) -> str:
+    """Whether the groom's size looked wrong (a run that diverged at once)."""
+    from .io import Groom, describe_groom_size
+
+    h = model.host
+    off = np.r_[h["strand_vertex_start"], h["strand_vertex_start"][-1] + h["strand_vertex_count"][-1]]
+    g = scene.groom if scene.groom is not None else Groom(points=np.asarray(h["vertex_rest_position"]),
+                                                          strand_offsets=off.astype(np.int64))
+    return describe_groom_size(g)
 
 
 # --------------------------------------------------------------------------- model choices
@@ -521,6 +639,9 @@ def register(sub) -> None:
     s.add_argument("--budget-ms", type=float, default=None, metavar="T",
                    help="pick the most accurate method and knobs that measured within T wall ms per frame for "
                         "this scene's vertex count")
+    s.add_argument("--strict", action="store_true",
+                   help="exit with status 3 when the run's quality fails (p99 edge strain above 5 %%, or free "
+                        "vertices deeper than 0.5 mm inside a body; see taichi_hair.quality)")
     s.add_argument("--pareto-data", default=None, metavar="CSV",
                    help="speed/accuracy data for --max-error/--budget-ms (default: the shipped CPU "
                         "measurements; a pareto.csv from taichi-hair bench pareto)")

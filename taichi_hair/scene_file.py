@@ -442,7 +442,7 @@ def _subsample(groom, count: int):
 
 def _load_groom_table(t: _Table, base: str, overrides: dict, desc: dict):
     from .generators import STYLES, GeneratorConfig, generate_groom, load_head, sphere_surface
-    from .io import load_groom
+    from .io import UnitsWarning, load_groom, units_warning
     from .io.groom import Groom
 
     root = t.get("root", "str", "clamped", lambda v: None if v in ("clamped", "free") else
@@ -478,9 +478,15 @@ def _load_groom_table(t: _Table, base: str, overrides: dict, desc: dict):
             p = _resolve(base, f)
             if not os.path.exists(p):
                 t.fail(f"no such file: {p}", "file")
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # the scale is given here; the unit warning is for load_groom users
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
                 g = load_groom(p, format=fmt, scale=scale)
+            for w in caught:  # the reader's own notes pass; the unit check is redone below for the scene
+                if not issubclass(w.category, UnitsWarning):
+                    warnings.warn(w.message, w.category, stacklevel=2)
+            msg = units_warning(g, f"{t.path}: [groom] file {f}", applied_scale=scale, context="scene")
+            if msg:
+                warnings.warn(msg, UnitsWarning, stacklevel=2)
             parts.append(g)
         if len(parts) == 1:
             groom = parts[0]

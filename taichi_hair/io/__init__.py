@@ -62,7 +62,7 @@ FORMAT_NAMES = tuple(READERS) + ("tfxmesh",)
 # Plausible median strand length for hair in metres.
 PLAUSIBLE_LENGTH_M = (1e-3, 5.0)
 
-__all__ = ["Groom", "GroomFormatError", "TfxMesh", "load_groom", "save_groom", "detect_format", "read_tfxmesh",
+__all__ = ["Groom", "GroomFormatError", "UnitsWarning", "TfxMesh", "load_groom", "save_groom", "detect_format", "read_tfxmesh",
            "FORMAT_NAMES", "READERS", "WRITERS"]
 
 
@@ -163,34 +163,100 @@ def detect_format(path) -> str:
                                  f"{', '.join(FORMAT_NAMES)})")
 
 
-def _suggest_scale(median: float) -> float:
-    """A power of ten bringing the median length near 20 cm (common units first)."""
-    for f in (0.01, 0.001, 0.0254, 1000.0):  # cm, mm, inches, km?!
-        if 0.02 <= median * f <= 2.0:
-            return f
-    return 10.0 ** round(math.log10(0.2 / median))
+#: Common length units of groom files and their factor to metres, most common first.
+COMMON_UNITS = (("centimetres", "cm", 0.01), ("millimetres", "mm", 0.001), ("inches", "in", 0.0254))
+#: What a groom in metres looks like: the median strand length [m] and the extent of its roots [m] (a
+#: scalp is about 0.2 m across).
+TYPICAL_LENGTH_M, TYPICAL_ROOT_EXTENT_M = 0.2, 0.2
+#: Roots spread wider than this cannot be one head in metres [m].
+PLAUSIBLE_ROOT_EXTENT_M = 3.0
 
 
-def check_plausible_units(groom: Groom, path="") -> None:
-    """Warn when the median strand length is implausible for hair in metres."""
+class UnitsWarning(UserWarning):
+    """A groom's size suggests it is not in metres (the message gives the likely unit and factor)."""
+
+
+def groom_size(groom: Groom) -> tuple:
+    """(median strand length, extent of the roots or None with fewer than 16 strands), in the groom's units.
+
+    The root extent is the diagonal of the bounding box of the strands' first points."""
     if groom.strand_count > 4096:  # a median over an even sample of strands is plenty for a warning
         pick = np.linspace(0, groom.strand_count - 1, 4096).astype(np.int64)
         off = groom.strand_offsets
-        groom = Groom(points=np.concatenate([groom.points[off[s]:off[s + 1]] for s in pick]),
-                      strand_offsets=np.concatenate([[0], np.cumsum(off[pick + 1] - off[pick])]))
-    med = float(np.median(groom.lengths()))
+        sample = Groom(points=np.concatenate([groom.points[off[s]:off[s + 1]] for s in pick]),
+                       strand_offsets=np.concatenate([[0], np.cumsum(off[pick + 1] - off[pick])]))
+    else:
+        sample = groom
+    med = float(np.median(sample.lengths())) if sample.strand_count else 0.0
+    extent = None
+    if groom.strand_count >= 16:
+        roots = np.asarray(groom.points[groom.strand_offsets[:-1]], np.float64)
+        extent = float(np.linalg.norm(roots.max(0) - roots.min(0)))
+    return med, extent
+
+
+def _suggest_scale(median: float, root_extent: float | None = None) -> tuple:
+    """(factor, unit name or None): the common unit whose factor makes the groom look most like hair in
+    metres (median length near 0.2 m and, when known, roots spread like a scalp), by the sum of the
+    log10 distances; inches pay 0.3 (rarer, and within a factor 2.5 of centimetres).  Without a common
+    unit giving 2 cm to 2 m, the power of ten that brings the median near 0.2 m."""
+    def score(f, name):
+        s = abs(math.log10(median * f / TYPICAL_LENGTH_M))
+        if root_extent is not None and root_extent > 0:
+            s += abs(math.log10(root_extent * f / TYPICAL_ROOT_EXTENT_M))
+        return s + (0.3 if name == "inches" else 0.0)
+
+    name, _, f = min(COMMON_UNITS, key=lambda u: score(u[2], u[0]))
+    if 0.02 <= median * f <= 2.0:
+        return f, name
+    return 10.0 ** round(math.log10(TYPICAL_LENGTH_M / median)), None
+
+
+def units_warning(groom: Groom, path="", applied_scale: float | None = None, context: str = "api") -> str | None:
+    """The unit warning for a groom read as metres, or None when its size is plausible for hair.
+
+    Implausible: a median strand length outside ``PLAUSIBLE_LENGTH_M``, or roots spread wider than
+    ``PLAUSIBLE_ROOT_EXTENT_M``.  ``applied_scale`` is the factor already applied (the hint then gives
+    the total factor); ``context`` "api" (load_groom / --scale) or "scene" (a scene file's [groom] keys).
+    """
+    med, extent = groom_size(groom)
     lo, hi = PLAUSIBLE_LENGTH_M
-    if lo <= med <= hi:
-        return
+    if lo <= med <= hi and (extent is None or extent <= PLAUSIBLE_ROOT_EXTENT_M):
+        return None
     where = f"{os.fspath(path)}: " if path else ""
     if med <= 0 or not math.isfinite(med):
-        warnings.warn(f"{where}median strand length is {med:g}; the strands are degenerate", stacklevel=3)
-        return
-    f = _suggest_scale(med)
-    warnings.warn(f"{where}median strand length is {med:.4g} file units, implausible for hair in metres "
-                  f"(expected {lo:g} to {hi:g} m); if the file is not in metres pass scale={f:g} "
-                  f"(giving {med * f:.3g} m), e.g. load_groom(path, scale={f:g}) or --scale {f:g}",
-                  stacklevel=3)
+        return f"{where}median strand length is {med:g}; the strands are degenerate"
+    f, name = _suggest_scale(med, extent)
+    applied = applied_scale if applied_scale is not None else 1.0
+    total = f * applied
+    size = f"median strand length {med:.4g} m" + (f", roots spread over {extent:.3g} m" if extent else "")
+    read = f"read with scale {applied:g}" if applied_scale not in (None, 1.0) else "read as metres"
+    looks = f"it looks like {name}" if name and applied in (None, 1.0) else f"a factor {f:g} more looks right"
+    if context == "scene":
+        unit = next((u for n, u, _ in COMMON_UNITS if n == name), None) if applied == 1.0 else None
+        fix = (f'set units = "{unit}" (or scale = {total:g})' if unit else f"set scale = {total:g}") + \
+            " in [groom]"
+    else:
+        fix = f"pass scale={total:g}, e.g. load_groom(path, scale={total:g}) or --scale {total:g}"
+    return (f"{where}{size} ({read}), implausible for hair (expected a median of {lo:g} to {hi:g} m); "
+            f"{looks}: {fix} (giving a median of {med * f:.3g} m)")
+
+
+def describe_groom_size(groom: Groom) -> str:
+    """One sentence on whether a groom (in metres) is hair-sized, for a run that diverged at once."""
+    msg = units_warning(groom, context="scene")
+    if msg:
+        return "the groom's size looked wrong: " + msg
+    med, extent = groom_size(groom)
+    return (f"the groom's size looked right for metres (median strand length {med:.3g} m"
+            + (f", roots over {extent:.3g} m" if extent else "") + ")")
+
+
+def check_plausible_units(groom: Groom, path="") -> None:
+    """Warn (``UnitsWarning``) when the groom's size is implausible for hair in metres."""
+    msg = units_warning(groom, path)
+    if msg:
+        warnings.warn(msg, UnitsWarning, stacklevel=3)
 
 
 def load_groom(path, format: str | None = None, scale: float | None = None, **options) -> Groom:

@@ -1,0 +1,177 @@
+"""How good a simulated frame is, measured on the host (NumPy and the exact mesh queries of
+:mod:`taichi_hair.mesh_query`): edge strain, penetration into bodies, hair-hair figures, rest.
+
+    q = frame_quality(x, v, model.host, colliders, body_rotation, body_translation, solver.contact_stats)
+    q["strain_p99"], q["body_penetration_max_m"], q["vertices_inside"], q["worst_strand"]
+
+Each figure is independent of the solver that made the frame (admm, shape, xpbd all give positions):
+
+- edge strain: |e_j| / e_rest_j - 1 over every real edge (ghost edges, of rest length 0, left out); the
+  statistics are of its absolute value (a stretch and a compression of 5 % count alike) [-];
+- penetration depth of a free vertex (clamped roots follow the body and are left out) into a body: its
+  distance to the collider's TRUE surface where it is inside, 0 outside [m].  Plane, sphere and capsule are
+  analytic.  A mesh is judged in two stages: the voxel SDF that the solve uses (trilinear, as the contact
+  kernel) picks the vertices it puts inside; for those, the exact distance to the triangles and the exact
+  generalized winding number (inside where w >= 1/2, right also for meshes with holes) decide.  A vertex
+  that the voxel SDF puts outside but that is inside the true surface is missed; it can only be within the
+  SDF's interpolation error of the surface (on assets/head.obj at 64^3, mesh2sdf's node values are within
+  0.2 mm of the exact distances, well under ``INSIDE_TOLERANCE_M``);
+- vertices inside a body: free vertices deeper than ``INSIDE_TOLERANCE_M`` in any body [-];
+- hair-hair: the ADMM solver's ``contact_stats`` keys ``hair_penetration_p99_m``,
+  ``hair_penetration_max_m`` and ``crossed_pairs`` when it provides them;
+- rest: the largest vertex speed of the frame [m/s]; a dynamic run "came to rest" when it is below
+  ``REST_SPEED_M_S`` in its last frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: A free vertex deeper than this inside a body counts as inside [m]: 0.5 mm, ten hair diameters, and
+#: more than the 0.2 mm by which the voxel SDF of assets/head.obj (64^3) departs from the exact distance.
+INSIDE_TOLERANCE_M = 0.5e-3
+#: A run whose p99 edge strain passes this fraction ends with a warning [-].
+STRAIN_WARNING = 0.05
+#: A dynamic run came to rest when no vertex moves faster than this in its last frame [m/s].
+REST_SPEED_M_S = 1e-2
+#: Hair-hair figures read from ``SolverADMM.contact_stats`` when present.
+HAIR_KEYS = ("hair_penetration_p99_m", "hair_penetration_max_m", "crossed_pairs")
+
+
+def edge_strain(positions, edge_rest_length) -> np.ndarray:
+    """|x_{j+1} - x_j| / e_rest_j - 1 of every vertex slot j, (V, 3) [m] and (V,) [m] -> (V,) [-].
+
+    Edge j joins vertex j to j + 1 (the Model's layout); slots whose rest length is 0 (the last vertex of
+    each strand) get 0."""
+    x = np.asarray(positions, np.float64)
+    rest = np.asarray(edge_rest_length, np.float64)
+    e = np.zeros(len(x))
+    e[:-1] = np.linalg.norm(x[1:] - x[:-1], axis=1)
+    real = rest > 0
+    out = np.zeros(len(x))
+    out[real] = e[real] / rest[real] - 1.0
+    return out
+
+
+def strain_statistics(positions, edge_rest_length, vertex_strand) -> dict:
+    """p50, p99 and max of |edge strain| over the real edges [-], and the strand of the largest (index).
+
+    Args:
+        positions: (V, 3) [m].  edge_rest_length: (V,) [m] (0 on ghost edges).  vertex_strand: (V,) [-].
+    """
+    s = edge_strain(positions, edge_rest_length)
+    real = np.asarray(edge_rest_length) > 0
+    a = np.abs(s[real])
+    if a.size == 0:
+        return dict(strain_p50=0.0, strain_p99=0.0, strain_max=0.0, strain_worst_strand=-1)
+    k = int(np.argmax(a))
+    return dict(strain_p50=float(np.percentile(a, 50)), strain_p99=float(np.percentile(a, 99)),
+                strain_max=float(a[k]), strain_worst_strand=int(np.asarray(vertex_strand)[real][k]))
+
+
+# --------------------------------------------------------------------------- bodies
+def _analytic_signed_distance(c, p) -> np.ndarray:
+    """Signed distance [m] of body-frame points p (N, 3) to a plane, sphere or capsule collider."""
+    from .colliders import CapsuleCollider, PlaneCollider, SphereCollider
+
+    if isinstance(c, PlaneCollider):
+        return (p - c.point) @ c.normal
+    if isinstance(c, SphereCollider):
+        return np.linalg.norm(p - c.center, axis=1) - c.radius
+    if isinstance(c, CapsuleCollider):
+        ab = c.p1 - c.p0
+        t = np.clip((p - c.p0) @ ab / max(float(ab @ ab), 1e-30), 0.0, 1.0)
+        return np.linalg.norm(p - (c.p0 + t[:, None] * ab), axis=1) - c.radius
+    raise TypeError(type(c).__name__)
+
+
+def mesh_penetration_depth(collider, points_body) -> np.ndarray:
+    """Depth [m] of body-frame points (N, 3) inside a :class:`~taichi_hair.colliders.MeshCollider`'s true
+    surface, 0 where outside (see the module docstring for the two stages)."""
+    p = np.asarray(points_body, np.float64).reshape(-1, 3)
+    depth = np.zeros(len(p))
+    cand = np.nonzero(collider.sdf_numpy(p) < 0.0)[0]
+    if len(cand):
+        q = collider.triangle_query
+        inside = q.winding_number(p[cand]) >= 0.5
+        cand = cand[inside]
+        if len(cand):
+            depth[cand] = q.unsigned_distance(p[cand])
+    return depth
+
+
+def body_penetration(positions, colliders, body_rotation, body_translation, vertex_strand, free) -> np.ndarray:
+    """Deepest penetration of each vertex into any collider, (V,) [m] (0: outside all, and at fixed vertices).
+
+    Args:
+        positions: (V, 3) world [m].  colliders: those of :mod:`taichi_hair.colliders`.
+        body_rotation: (B, 3, 3) [-] and body_translation: (B, 3) [m], the transforms the frame ended with.
+        vertex_strand: (V,) [-] (for collider strand ranges).  free: (V,) bool, vertices the solver moves.
+    """
+    from .colliders import MeshCollider
+
+    x = np.asarray(positions, np.float64)
+    out = np.zeros(len(x))
+    strand = np.asarray(vertex_strand)
+    for c in colliders:
+        sel = np.asarray(free, bool).copy()
+        if c.strands is not None:
+            sel &= (strand >= c.strands[0]) & (strand < c.strands[1])
+        idx = np.nonzero(sel)[0]
+        if len(idx) == 0:
+            continue
+        p = x[idx]
+        if c.body >= 0:
+            R = np.asarray(body_rotation[c.body], np.float64)
+            p = (p - np.asarray(body_translation[c.body], np.float64)) @ R  # R^T (x - T), row-wise
+        if isinstance(c, MeshCollider):
+            d = mesh_penetration_depth(c, p)
+        else:
+            d = np.maximum(-_analytic_signed_distance(c, p), 0.0)
+        out[idx] = np.maximum(out[idx], d)
+    return out
+
+
+# --------------------------------------------------------------------------- one frame
+def frame_quality(positions, velocities, host: dict, colliders=(), body_rotation=None, body_translation=None,
+                  contact_stats=None, tolerance: float = INSIDE_TOLERANCE_M) -> dict:
+    """Every figure of the module docstring for one frame.
+
+    Args:
+        positions, velocities: (V, 3) [m], [m/s].  host: ``Model.host`` (edge_rest_length, vertex_strand,
+        vertex_is_fixed).  colliders, body_rotation (B, 3, 3), body_translation (B, 3): the bodies.
+        contact_stats: the solver's ``contact_stats`` (hair-hair keys read with ``.get``), or None.
+        tolerance: depth beyond which a vertex counts as inside a body [m].
+
+    Returns a flat dict: strain_p50/p99/max [-], strain_worst_strand, body_penetration_p99_m/max_m (over
+    the free vertices, 0 where outside) [m], vertices_inside [-], penetration_worst_strand (-1: none),
+    max_speed_m_s [m/s], and the hair-hair keys that the solver gave.
+    """
+    strand = np.asarray(host["vertex_strand"])
+    q = strain_statistics(positions, host["edge_rest_length"], strand)
+    free = np.asarray(host.get("vertex_is_fixed", np.zeros(len(strand)))) == 0
+    if colliders:
+        depth = body_penetration(positions, colliders, body_rotation, body_translation, strand, free)
+        d = depth[free] if free.any() else np.zeros(1)
+        k = int(np.argmax(depth))
+        q.update(body_penetration_p99_m=float(np.percentile(d, 99)), body_penetration_max_m=float(depth[k]),
+                 vertices_inside=int(np.count_nonzero(depth > tolerance)),
+                 penetration_worst_strand=int(strand[k]) if depth[k] > 0 else -1)
+    v = np.asarray(velocities, np.float64)
+    q["max_speed_m_s"] = float(np.max(np.linalg.norm(v, axis=1))) if len(v) else 0.0
+    for key in HAIR_KEYS:
+        if contact_stats and contact_stats.get(key) is not None:
+            q[key] = contact_stats.get(key)
+    return q
+
+
+def quality_warnings(q: dict, tolerance: float = INSIDE_TOLERANCE_M) -> list:
+    """One line per failed figure of a frame's :func:`frame_quality` (empty: the frame is fine)."""
+    out = []
+    if q["strain_p99"] > STRAIN_WARNING:
+        out.append(f"p99 edge strain {100 * q['strain_p99']:.2f} % passes {100 * STRAIN_WARNING:g} % (max "
+                   f"{100 * q['strain_max']:.2f} % on strand {q['strain_worst_strand']})")
+    if q.get("vertices_inside", 0) > 0:
+        out.append(f"{q['vertices_inside']} vertices deeper than {1e3 * tolerance:g} mm inside a body (deepest "
+                   f"{1e3 * q['body_penetration_max_m']:.2f} mm, strand {q['penetration_worst_strand']})")
+    return out
