@@ -219,15 +219,27 @@ class MeshCollider:
         w = grid_winding_number(self._query, origin, spacing, self.resolution, unsigned)
         what = (f"MeshCollider: {self.source} is not watertight ({self.boundary_edge_count} boundary edges in "
                 f"{self.hole_count} holes)")
-        if w.max() < 0.75:
+        # Nodes on the surface itself have no defined winding number; judge the enclosed volume off it.
+        off = unsigned > 0.5 * spacing
+        w_max = float(w[off].max()) if off.any() else 0.0
+        if w_max < 0.75:
             self.sign_method = "unsigned-shell"
-            warnings.warn(f"{what} and encloses no volume (largest winding number {w.max():.2f}); using the "
+            warnings.warn(f"{what} and encloses no volume (largest winding number {w_max:.2f}); using the "
                           f"unsigned distance minus a thickness of {self.thickness} m", stacklevel=4)
             return unsigned - self.thickness
         self.sign_method = "winding"
         warnings.warn(f"{what}; inside/outside from its generalized winding number at the "
                       f"{self.resolution}^3 SDF nodes (inside where w >= 1/2)", stacklevel=4)
-        return np.where(w >= 0.5, -unsigned, unsigned)
+        # Over a hole the surface is the level w = 1/2 (the "cap"), far from every triangle: there the
+        # distance is that to the level set, to first order (1/2 - w) / |grad w|, so that the field does
+        # not jump from +d to -d across the cap.  Only at nodes away from the triangles (> 1.5 spacings)
+        # where w is neither 0 nor 1.
+        g = np.gradient(w, spacing)
+        grad = np.sqrt(g[0] ** 2 + g[1] ** 2 + g[2] ** 2)
+        cap = np.abs(0.5 - w) / np.maximum(grad, 1e-12)
+        over_hole = (unsigned > 1.5 * spacing) & (w > 0.05) & (w < 0.95)
+        dist = np.where(over_hole, np.minimum(unsigned, cap), unsigned)
+        return np.where(w >= 0.5, -dist, dist)
 
     @property
     def triangle_query(self):

@@ -15,7 +15,8 @@ Each figure is independent of the solver that made the frame (admm, shape, xpbd 
   generalized winding number (inside where w >= 1/2, right also for meshes with holes) decide.  A vertex
   that the voxel SDF puts outside but that is inside the true surface is missed; it can only be within the
   SDF's interpolation error of the surface (on assets/head.obj at 64^3, mesh2sdf's node values are within
-  0.2 mm of the exact distances, well under ``INSIDE_TOLERANCE_M``);
+  0.2 mm of the exact distances, well under ``INSIDE_TOLERANCE_M``).  For a mesh with holes the depth is at
+  most the SDF's, which over a hole measures to the winding number's cap (w = 1/2), not to a triangle;
 - vertices inside a body: free vertices deeper than ``INSIDE_TOLERANCE_M`` in any body [-];
 - hair-hair: the ADMM solver's ``contact_stats`` keys ``hair_penetration_p99_m``,
   ``hair_penetration_max_m`` and ``crossed_pairs`` when it provides them;
@@ -97,6 +98,10 @@ def mesh_penetration_depth(collider, points_body) -> np.ndarray:
         cand = cand[inside]
         if len(cand):
             depth[cand] = q.unsigned_distance(p[cand])
+            if collider.sign_method == "winding":
+                # Over a hole the surface is the cap (w = 1/2), not a triangle: the SDF's distance to it
+                # bounds the depth there (elsewhere the SDF's |phi| is larger, up to interpolation error).
+                depth[cand] = np.minimum(depth[cand], -collider.sdf_numpy(p[cand]))
     return depth
 
 
