@@ -108,6 +108,30 @@ def quat_from_matrix(R) -> vec4:
 
 
 @ti.func
+def quat_to_matrix(q: vec4):
+    """3x3 rotation matrix of a unit quaternion (its columns are the rotated axes)."""
+    return ti.Matrix.cols([quat_rotate(q, vec3(1.0, 0.0, 0.0)), quat_rotate(q, vec3(0.0, 1.0, 0.0)),
+                           quat_rotate(q, vec3(0.0, 0.0, 1.0))])
+
+
+@ti.func
+def quat_slerp(a: vec4, b: vec4, u: float) -> vec4:
+    """Spherical interpolation from unit quaternion a (u = 0) to b (u = 1), along the shorter arc."""
+    d = a.dot(b)
+    bb = b
+    if d < 0.0:
+        bb = -b
+        d = -d
+    out = bb
+    if d > 0.9995:  # nearly equal: linear interpolation, renormalised
+        out = (a + u * (bb - a)).normalized()
+    else:
+        theta = ti.acos(ti.min(d, 1.0))
+        out = ((ti.sin((1.0 - u) * theta) * a + ti.sin(u * theta) * bb) / ti.sin(theta)).normalized()
+    return out
+
+
+@ti.func
 def safe_normalized(v: vec3, fallback: vec3) -> vec3:
     """v / |v|, or ``fallback`` when v is (nearly) zero: collapsed vertices must not make NaN frames."""
     n = v.norm()
@@ -224,6 +248,24 @@ def project_out_of_collider(cs: ti.template(), c: ti.i32, p: vec3, p_begin: vec3
 
 
 @ti.func
+def project_out_of_collider_normal(cs: ti.template(), c: ti.i32, p: vec3, radius: float) -> vec3:
+    """:func:`project_out_of_collider` without friction: ``p`` moves along the collider's normal until it
+    is ``radius`` away (two passes, as there).  The follow-the-leader pass uses it: friction was already
+    applied once in the step's collision stage and must not act twice."""
+    R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[c])
+    q = R.transpose() @ (p - T)
+    out = p
+    d, n = collider_distance(cs, c, q)
+    if d < radius:
+        q = q + (radius - d) * n
+        d2, n2 = collider_distance(cs, c, q)
+        if d2 < radius:
+            q = q + (radius - d2) * n2
+        out = R @ q + T
+    return out
+
+
+@ti.func
 def inverse_mass(model: ti.template(), i: ti.i32) -> float:
     """1 for a simulated vertex, 0 for a kinematic one (Sec. 3.2: only the fixed/free flag is used)."""
     return 1.0 - ti.cast(model.vertex_is_fixed[i], float)
@@ -304,10 +346,34 @@ def compute_head_rotations(model: ti.template(), body_rotation: ti.template(), x
 
 @ti.kernel
 def begin_step(x: ti.template(), v: ti.template(), solver: ti.template()):
-    """Keep x^t (the Verlet x_prev, Sec. 3.2) and v^t (to restore a diverged step)."""
+    """Keep x^t and v^t of the whole step (to restore a diverged step, and for the shock test)."""
     for i in x:
         solver.vertex_position_begin[i] = x[i]
         solver.vertex_velocity_begin[i] = v[i]
+
+
+@ti.kernel
+def begin_substep(x: ti.template(), solver: ti.template()):
+    """Keep the substep's x^t (the Verlet x_prev of Sec. 3.2, moved by the shock propagation)."""
+    for i in x:
+        solver.vertex_position_substep[i] = x[i]
+
+
+@ti.kernel
+def interpolate_body_transforms(rotation_begin: ti.template(), translation_begin: ti.template(),
+                                rotation_end: ti.template(), translation_end: ti.template(), u: float,
+                                out_rotation: ti.template(), out_translation: ti.template()):
+    """Body transforms at the fraction u in [0, 1] of the step: rotations slerped, translations linear, so
+    that a body turning at a constant rate takes equal turns per substep and clamped roots stay on it."""
+    for b in rotation_end:
+        if u >= 1.0:  # the end of the step: the control's transforms bit for bit
+            out_rotation[b] = rotation_end[b]
+            out_translation[b] = translation_end[b]
+        else:
+            qa = quat_from_matrix(rotation_begin[b])
+            qb = quat_from_matrix(rotation_end[b])
+            out_rotation[b] = quat_to_matrix(quat_slerp(qa, qb, u))
+            out_translation[b] = (1.0 - u) * translation_begin[b] + u * translation_end[b]
 
 
 @ti.kernel
@@ -320,15 +386,17 @@ def integrate(
     air_velocity: vec3,
     air_drag: float,
     dt: float,
+    v: ti.template(),
     x: ti.template(),
 ):
-    """Sec. 3.2: Verlet with damping, x <- x + (1 - c) v dt + a dt^2, for free vertices; kinematic
-    vertices go to their body's transform at the end of the step, W_T_H x_body.
+    """Sec. 3.2: Verlet with damping, x <- x^t + (1 - c) v dt + a dt^2, for free vertices; kinematic
+    vertices go to their body's transform at the end of the (sub)step, W_T_H x_body.
 
-    ``v = (x^t - x^{t-1}) / dt`` is the state velocity, so ``v dt`` is Verlet's x - x_prev; c is the
-    region's damping coefficient.  a = gravity + wind, the wind term being
-    ``air_drag (v_air - v)_perp``: the relative air velocity's component normal to the strand
-    (tangent = central difference of the begin-of-step positions), where a thin fibre's drag acts.
+    ``x^t`` is ``solver.vertex_position_substep``, ``v`` the state velocity (that of the previous
+    substep), so ``v dt`` is Verlet's x - x_prev; c is the region's damping coefficient per substep.
+    a = gravity + wind, the wind term being ``air_drag (v_air - v)_perp``: the relative air velocity's
+    component normal to the strand (tangent = central difference of the begin-of-substep positions),
+    where a thin fibre's drag acts.
     """
     for i in x:
         if model.vertex_is_fixed[i] != 0:
@@ -341,12 +409,60 @@ def integrate(
             last = a + model.strand_vertex_count[s] - 1
             lo = ti.max(i - 1, a)
             hi = ti.min(i + 1, last)
-            t = safe_normalized(solver.vertex_position_begin[hi] - solver.vertex_position_begin[lo], vec3(0.0))
-            v = solver.vertex_velocity_begin[i]
-            rel = air_velocity - v
+            t = safe_normalized(solver.vertex_position_substep[hi] - solver.vertex_position_substep[lo], vec3(0.0))
+            vi = v[i]
+            rel = air_velocity - vi
             accel = gravity + air_drag * (rel - rel.dot(t) * t)
             c = solver.region_damping[r]
-            x[i] = solver.vertex_position_begin[i] + (1.0 - c) * dt * v + (dt * dt) * accel
+            x[i] = solver.vertex_position_substep[i] + (1.0 - c) * dt * vi + (dt * dt) * accel
+
+
+@ti.kernel
+def compute_shock_coefficients(model: ti.template(), solver: ti.template(), body_rotation: ti.template(),
+                               body_translation: ti.template(), coefficient: float, acceleration_threshold: float,
+                               dt: float):
+    """TressFX's velocity shock propagation, strand level: the blend weight of the root's rigid motion.
+
+    ``coefficient`` for every strand with two kinematic root vertices, raised to 1 where the second root
+    vertex's acceleration over the step, ``|x_1^{t+1} - 2 x_1^t + x_1^{t-1}| / dt^2`` with
+    ``x_1^{t-1} = x_1^t - v_1^t dt``, exceeds ``acceleration_threshold`` [m/s^2] (TressFX measures the
+    same second difference in scene units per frame^2).  0 for other strands (no root motion to carry).
+    """
+    for s in model.strand_body:
+        a = model.strand_vertex_start[s]
+        w = 0.0
+        if model.vertex_is_fixed[a] != 0 and model.vertex_is_fixed[a + 1] != 0:
+            b = model.strand_body[s]
+            x_end = body_rotation[b] @ model.vertex_body_position[a + 1] + body_translation[b]
+            x_now = solver.vertex_position_begin[a + 1]
+            x_before = x_now - dt * solver.vertex_velocity_begin[a + 1]
+            w = coefficient
+            if (x_end - 2.0 * x_now + x_before).norm() > acceleration_threshold * dt * dt:
+                w = 1.0
+        solver.strand_shock_coefficient[s] = w
+
+
+@ti.kernel
+def propagate_velocity_shock(model: ti.template(), solver: ti.template(), x: ti.template()):
+    """TressFX's velocity shock propagation, vertex level: the rigid motion (R, T) taking the root edge
+    from the beginning of the substep to its end (R the shortest arc between the two root-edge
+    directions, T placing the root) is blended with weight w into both x and x^t of every free vertex:
+    ``y <- (1 - w) y + w (R y + T)``.  Moving both carries the strand with the head without adding the
+    head's velocity to it (the Verlet velocity x - x^t only turns by R), which is what keeps a sudden head
+    motion from stretching or whipping the hair."""
+    for i in x:
+        s = model.vertex_strand[i]
+        w = solver.strand_shock_coefficient[s]
+        if w > 0.0 and model.vertex_is_fixed[i] == 0:
+            a = model.strand_vertex_start[s]
+            u = safe_normalized(solver.vertex_position_substep[a + 1] - solver.vertex_position_substep[a],
+                                vec3(1.0, 0.0, 0.0))
+            e = safe_normalized(x[a + 1] - x[a], u)
+            q = quat_between(u, e)
+            T = x[a] - quat_rotate(q, solver.vertex_position_substep[a])
+            x[i] = (1.0 - w) * x[i] + w * (quat_rotate(q, x[i]) + T)
+            p = solver.vertex_position_substep[i]
+            solver.vertex_position_substep[i] = (1.0 - w) * p + w * (quat_rotate(q, p) + T)
 
 
 @ti.kernel
@@ -485,7 +601,8 @@ def project_collisions(model: ti.template(), solver: ti.template(), cs: ti.templ
 
     Colliders are visited in order, once each (Gauss-Seidel over colliders): a vertex caught
     between two colliders ends outside the last one.  ``cs`` holds the body transforms of the
-    step (:meth:`ColliderSet.begin_step`); colliders follow the end-of-step transform.
+    (sub)step (:meth:`ColliderSet.begin_step`); colliders follow the end-of-substep transform, and
+    friction sees the vertex's motion over the substep.
     """
     for i in x:
         if model.vertex_is_fixed[i] == 0:
@@ -493,16 +610,68 @@ def project_collisions(model: ti.template(), solver: ti.template(), cs: ti.templ
             p = x[i]
             for c in range(cs.count_field[None]):
                 if acts_on(cs, c, s):
-                    p = project_out_of_collider(cs, c, p, solver.vertex_position_begin[i],
+                    p = project_out_of_collider(cs, c, p, solver.vertex_position_substep[i],
                                                 solver.vertex_collision_radius[i])
             x[i] = p
 
 
 @ti.kernel
-def end_step(solver: ti.template(), dt: float, x: ti.template(), v: ti.template()):
-    """v = (x - x^t) / dt: the Verlet velocity of the next step, kept in the State for other code."""
+def follow_the_leader(use_colliders: ti.template(), model: ti.template(), solver: ti.template(),
+                      cs: ti.template(), x: ti.template()):
+    """Exact edge lengths: walk each strand from root to tip and put every free vertex at its rest length
+    from its predecessor, along the current edge direction (follow-the-leader, FTL, as in Mueller et al.
+    2012; what the iterated length constraints converge to when the root side is held).
+
+    With ``use_colliders`` the placed vertex is then pushed out of the colliders along their normals
+    (:func:`project_out_of_collider_normal`), so the pass does not undo the collision stage; that edge
+    is then off its rest length by the push, and the walk goes on from the pushed vertex.  The move of
+    each vertex, ``d_i = x_i^new - x_i^old``, is kept in ``solver.vertex_length_correction`` for the
+    velocity correction of :func:`end_substep` (0 on kinematic vertices).  A zero-length edge keeps the
+    direction of the edge before it (the rest direction carried by the head at the root).
+    """
+    for s in model.strand_vertex_start:
+        a = model.strand_vertex_start[s]
+        m = model.strand_vertex_count[s]
+        solver.vertex_length_correction[a] = vec3(0.0)
+        fallback = quat_rotate(solver.strand_head_rotation[s],
+                               safe_normalized(model.vertex_rest_position[a + 1] - model.vertex_rest_position[a],
+                                               vec3(1.0, 0.0, 0.0)))
+        for k in range(1, m):
+            i = a + k
+            e = x[i] - x[i - 1]
+            direction = safe_normalized(e, fallback)
+            fallback = direction
+            if model.vertex_is_fixed[i] == 0:
+                p = x[i - 1] + model.edge_rest_length[i - 1] * direction
+                if ti.static(use_colliders):
+                    for c in range(cs.count_field[None]):
+                        if acts_on(cs, c, s):
+                            p = project_out_of_collider_normal(cs, c, p, solver.vertex_collision_radius[i])
+                solver.vertex_length_correction[i] = p - x[i]
+                x[i] = p
+            else:
+                solver.vertex_length_correction[i] = vec3(0.0)
+
+
+@ti.kernel
+def end_substep(model: ti.template(), solver: ti.template(), dt: float, length_velocity_correction: float,
+                x: ti.template(), v: ti.template()):
+    """v = (x - x^t) / dt - s d_{i+1} / dt: the Verlet velocity of the next substep, kept in the State.
+
+    The second term is the velocity correction of Mueller et al. 2012 ("dynamic FTL") with
+    s = ``length_velocity_correction``: follow-the-leader moves vertex i+1 by d_{i+1} and leaves
+    vertex i where it was, as if i were infinitely heavy; a mass-weighted constraint would have moved
+    i by -d_{i+1} as well.  Adding that missing move to i's velocity (not its position) gives back the
+    momentum the one-sided projection takes.  s = 0 gives v = (x - x^t) / dt.  Tips (no i+1) and
+    kinematic vertices get no correction.
+    """
     for i in x:
-        v[i] = (x[i] - solver.vertex_position_begin[i]) / dt
+        vi = (x[i] - solver.vertex_position_substep[i]) / dt
+        if length_velocity_correction > 0.0 and model.vertex_is_fixed[i] == 0:
+            s = model.vertex_strand[i]
+            if model.vertex_local_index[i] < model.strand_vertex_count[s] - 1:
+                vi -= (length_velocity_correction / dt) * solver.vertex_length_correction[i + 1]
+        v[i] = vi
 
 
 @ti.kernel
