@@ -429,7 +429,7 @@ def cmd_simulate(args) -> int:
             print(f"note: {_groom_size_note(scene, model)}", file=sys.stderr)
         return 1
     failed = _quality_lines(summary["quality"])
-    for line in failed:
+    for line in failed if not args.strict else ():
         print(f"warning: {line}", file=sys.stderr)
     if eq is not None:
         if not eq.converged:

@@ -257,3 +257,33 @@ def test_progress_lines_when_not_a_terminal():
     quiet = io.StringIO()
     Progress(3, stream=quiet, enabled=False).update(3)
     assert quiet.getvalue() == ""
+
+
+def _hair_sized_groom(unit: float):
+    """20 strands of 20 cm with roots spread over a 20 cm square, in a file unit (1 m = 1 / unit)."""
+    from taichi_hair.io import Groom
+
+    polys = [np.c_[np.full(5, 0.2 * (s % 5) / 4), -np.linspace(0, 0.2, 5), np.full(5, 0.2 * (s // 5) / 3)] / unit
+             for s in range(20)]
+    return Groom.from_polylines(polys)
+
+
+@pytest.mark.parametrize("unit, name, factor", [(0.01, "cm", "0.01"), (0.001, "mm", "0.001")])
+def test_scene_file_groom_in_cm_or_mm_read_as_metres_warns_with_the_unit(tmp_path, unit, name, factor):
+    # A 20 cm groom saved in centimetres (lengths 20) or millimetres (200) and read as metres: the warning
+    # names the unit and the factor (for millimetres the old hint said 0.01, 10x off), and the scene's
+    # own keys to fix it; with the unit given, no unit warning.
+    import warnings
+
+    from taichi_hair.io import UnitsWarning, save_groom
+
+    save_groom(_hair_sized_groom(unit), tmp_path / "g.hair")
+    with pytest.warns(UnitsWarning, match=rf'g\.hair.*set units = "{name}" \(or scale = {factor}\) in \[groom\]'):
+        load_scene(write(tmp_path, '[groom]\nfile = "g.hair"\n'))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnitsWarning)
+        s = load_scene(write(tmp_path, f'[groom]\nfile = "g.hair"\nunits = "{name}"\n'))
+    assert np.allclose(s.groom.lengths(), 0.2, rtol=1e-6)
+    if name == "mm":  # a scale that leaves the groom 100x too large (20 m) is caught, with the total factor
+        with pytest.warns(UnitsWarning, match=r"read with scale 0\.1\).*set scale = 0\.001 in \[groom\]"):
+            load_scene(write(tmp_path, '[groom]\nfile = "g.hair"\nscale = 0.1\n'))
