@@ -12,12 +12,16 @@ it reports the mean wall time of a step (after a warm-up; kernel compilation is
 reported apart) and a per-stage split from a second, profiled pass (profiling
 synchronises after each stage, so its total is a little higher).  As a quality
 proxy it also reports the RMS and largest distance of each method's vertices to
-Method 1's (the paper's reference) after the same nodding steps, and the mean
-and largest relative edge stretch at the end.
+Method 1's (the paper's reference) after the same nodding steps, and the
+distribution of the edge strain |l / l0 - 1| at the end (p50, p99, max, and the mean).
+
+``--scheme defaults`` (the default) runs SolverShapeConfig's shipped defaults (substeps, the
+follow-the-leader pass and its velocity correction); ``--scheme paper`` the paper's scheme alone
+(one pass of Algorithm 1 per step, no follow-the-leader), the solver as it was before those.
 
 Usage:
     python benchmarks/bench_shape.py [--arch cpu|cuda] [--sizes 20000x11,20000x64] [--methods 1,2,3]
-                                     [--steps N] [--out FILE]
+                                     [--scheme defaults|paper] [--steps N] [--out FILE]
 
 Figures are printed and written as JSON (default benchmarks/results/shape_<arch>.json).
 """
@@ -52,7 +56,11 @@ def groom(th, strands, vertices):
     return scene, build_hang(scene)
 
 
-def bench_size(th, ti, strands, vertices, methods, steps):
+#: SolverShapeConfig fields of each --scheme (the others are the config's defaults).
+SCHEMES = {"defaults": {}, "paper": {"substeps": 1, "follow_the_leader": False}}
+
+
+def bench_size(th, ti, strands, vertices, methods, steps, scheme="defaults"):
     from taichi_hair.scenes import nod_rotation
     from taichi_hair.colliders import SphereCollider
     from taichi_hair.solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
@@ -71,7 +79,8 @@ def bench_size(th, ti, strands, vertices, methods, steps):
     snapshot = state.to_numpy()
     for method in methods:
         state.load(snapshot)
-        solver = SolverShape(model, SolverShapeConfig(method=method, regions=(region,)), colliders=colliders)
+        cfg = SolverShapeConfig(method=method, regions=(region,), **SCHEMES[scheme])
+        solver = SolverShape(model, cfg, colliders=colliders)
         t = 0.0
 
         def step():
@@ -102,21 +111,28 @@ def bench_size(th, ti, strands, vertices, methods, steps):
         real = model.host["edge_rest_length"] > 0
         idx = np.where(real)[0]
         stretch = np.linalg.norm(x[idx + 1] - x[idx], axis=1) / model.host["edge_rest_length"][idx] - 1.0
+        strain = np.abs(stretch)
+        p50, p99 = (float(v) for v in np.percentile(strain, [50, 99]))
         # Quality proxy: distance to Method 1's result after the same 3 + 2 * steps nodding steps.
         diff = np.linalg.norm(x - finals[1], axis=1) if 1 in finals else None
         rows.append({"strands": model.strand_count, "vertices_per_strand": vertices, "vertices": model.vertex_count,
-                     "method": method, "length_iterations": length_its, "local_iterations": local_its,
+                     "method": method, "scheme": scheme, "substeps": cfg.substeps,
+                     "follow_the_leader": cfg.follow_the_leader,
+                     "length_velocity_correction": cfg.length_velocity_correction,
+                     "length_iterations": length_its, "local_iterations": local_its,
                      "colliders": len(colliders), "steps_timed": steps, "ms_per_step": ms,
                      "compile_and_first_step_s": compile_s, "stage_ms_per_step": stage_ms,
                      "steps_run": 3 + 2 * steps,
                      "edge_stretch_max": float(np.abs(stretch).max()),
                      "edge_stretch_mean": float(np.abs(stretch).mean()),
+                     "edge_strain_p50": p50, "edge_strain_p99": p99,
                      "rms_distance_to_method1_mm": None if diff is None else 1e3 * float(np.sqrt(np.mean(diff**2))),
                      "max_distance_to_method1_mm": None if diff is None else 1e3 * float(diff.max())})
         stages = " ".join(f"{k}={v:.2f}" for k, v in stage_ms.items())
         dist = "" if diff is None else f"{1e3 * np.sqrt(np.mean(diff**2)):8.2f} {1e3 * diff.max():8.2f}"
         print(f"{strands:>7} x {vertices:<3} {model.vertex_count:>9} {method:>6} {ms:10.2f} {compile_s:10.2f} "
-              f"{dist:>17} {100 * np.abs(stretch).mean():6.2f} {100 * np.abs(stretch).max():6.1f}  {stages}",
+              f"{dist:>17} {100 * p50:8.4f} {100 * p99:8.4f} {100 * strain.max():8.4f} {100 * strain.mean():8.4f}  "
+              f"{stages}",
               flush=True)
     return rows
 
@@ -126,6 +142,7 @@ def main(argv=None):
     p.add_argument("--arch", default="cpu", choices=("cpu", "cuda"))
     p.add_argument("--sizes", default="20000x11,20000x64")
     p.add_argument("--methods", default="1,2,3")
+    p.add_argument("--scheme", default="defaults", choices=tuple(SCHEMES))
     p.add_argument("--steps", type=int, default=None, help="timed steps per case (default 10 on cpu, 100 on cuda)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
@@ -141,7 +158,7 @@ def main(argv=None):
     out = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "arch": arch,
            "machine": machine(), "taichi": version,
            "command": "python " + " ".join([os.path.relpath(__file__, os.getcwd())] + sys.argv[1:]),
-           "dt_s": DT, "results": []}
+           "dt_s": DT, "scheme": args.scheme, "results": []}
     if arch == "cuda":
         try:
             import subprocess
@@ -151,13 +168,14 @@ def main(argv=None):
         except (OSError, subprocess.SubprocessError):
             pass
     print(f"SolverShape benchmark on {arch} ({os.cpu_count()} cores), taichi {version}, dt = 1/60 s, "
-          f"{steps} timed steps")
+          f"{steps} timed steps, scheme {args.scheme} {SCHEMES[args.scheme] or '(SolverShapeConfig defaults)'}")
     print(f"{'strands x verts':>15} {'vertices':>9} {'method':>6} {'ms/step':>10} {'compile s':>10} "
-          f"{'vs M1 rms/max mm':>17} {'str%':>6} {'max%':>6}  stage ms/step")
+          f"{'vs M1 rms/max mm':>17} {'p50 %':>8} {'p99 %':>8} {'max %':>8} {'mean %':>8}  stage ms/step")
     for size in args.sizes.split(","):
         ns, nv = (int(v) for v in size.split("x"))
-        out["results"].extend(bench_size(th, ti, ns, nv, methods, steps))
-    path = args.out or os.path.join(HERE, "results", f"shape_{arch}.json")
+        out["results"].extend(bench_size(th, ti, ns, nv, methods, steps, args.scheme))
+    suffix = "" if args.scheme == "defaults" else f"_{args.scheme}"
+    path = args.out or os.path.join(HERE, "results", f"shape_{arch}{suffix}.json")
     os.makedirs(os.path.dirname(path), exist_ok=True)
     with open(path, "w") as fh:
         json.dump(out, fh, indent=2)

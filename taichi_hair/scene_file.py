@@ -37,6 +37,8 @@ degrees; relative paths are relative to the scene file)::
     [solver]
     type = "admm"                # "admm" (Daviet 2023, the main solver), "shape" (Han & Harada) or "xpbd"
     iterations = 10              # and any other field of that solver's config dataclass
+    # shape (SolverShapeConfig): substeps = 2 (per scene substep), follow_the_leader = true,
+    # length_velocity_correction = 1.0, shock_propagation = 0.0, shock_acceleration_threshold = 50.0 [m/s^2]
     [solver.contacts]            # admm: ContactConfig fields; the table turns hair-hair contacts on
     friction = 0.2
     [solver.region]              # shape: one ShapeRegion for every strand

@@ -266,6 +266,48 @@ def project_out_of_collider_normal(cs: ti.template(), c: ti.i32, p: vec3, radius
 
 
 @ti.func
+def place_at_length_outside_collider(cs: ti.template(), c: ti.i32, leader: vec3, p: vec3, rest_length: float,
+                                     radius: float) -> vec3:
+    """The follow-the-leader placement ``p`` (at ``rest_length`` from ``leader``) moved out of collider
+    ``c`` while keeping that length, as far as a tangent plane allows.
+
+    If ``p`` is closer than ``radius`` to the collider it is pushed out along the normal n to q (as
+    :func:`project_out_of_collider_normal`), then slid in the tangent plane at q to the point at
+    ``rest_length`` from the leader that is nearest to q: with the leader at height a above the plane
+    and lateral offset b from q, ``q + b - sqrt(l^2 - a^2) b / |b|``.  Pushing back towards the leader
+    along the edge instead would leave an edge that points into the collider short (a strand draped
+    straight down onto a sphere), and no amount of pushing along the normal fixes it.  If the leader
+    is more than ``rest_length`` above the plane, the vertex goes back onto the line from the leader
+    to q, at the rest length (then outside the plane).  A convex collider lies below its tangent plane,
+    so the slid point is outside up to the surface's curvature; the caller pushes once more.
+    """
+    R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[c])
+    q = R.transpose() @ (p - T)
+    o = R.transpose() @ (leader - T)
+    out = p
+    d, n = collider_distance(cs, c, q)
+    if d < radius:
+        q = q + (radius - d) * n
+        w = o - q
+        a = w.dot(n)
+        b = w - a * n
+        r2 = rest_length * rest_length - a * a
+        if r2 > 0.0:
+            bn = b.norm()
+            lateral = vec3(0.0)
+            if bn > 1e-9 * rest_length:
+                lateral = b / bn
+            else:  # the edge points straight into the collider: any tangent direction will do
+                lateral = safe_normalized(n.cross(vec3(0.0, 0.0, 1.0)), safe_normalized(n.cross(vec3(1.0, 0.0, 0.0)),
+                                                                                        vec3(0.0, 1.0, 0.0)))
+            q = q + b - ti.sqrt(r2) * lateral
+        else:
+            q = o + rest_length * safe_normalized(q - o, n)
+        out = R @ q + T
+    return out
+
+
+@ti.func
 def inverse_mass(model: ti.template(), i: ti.i32) -> float:
     """1 for a simulated vertex, 0 for a kinematic one (Sec. 3.2: only the fixed/free flag is used)."""
     return 1.0 - ti.cast(model.vertex_is_fixed[i], float)
@@ -623,8 +665,11 @@ def follow_the_leader(use_colliders: ti.template(), model: ti.template(), solver
     2012; what the iterated length constraints converge to when the root side is held).
 
     With ``use_colliders`` the placed vertex is then pushed out of the colliders along their normals
-    (:func:`project_out_of_collider_normal`), so the pass does not undo the collision stage; that edge
-    is then off its rest length by the push, and the walk goes on from the pushed vertex.  The move of
+    and slid in the collider's tangent plane back to the rest length from its predecessor
+    (:func:`place_at_length_outside_collider`), then pushed out once more along the normals
+    (:func:`project_out_of_collider_normal`): the pass does not undo the collision stage, and an edge
+    is off its rest length only by what that last push leaves (the slide's chord dips into a curved
+    surface by a second-order amount).  The walk goes on from the placed vertex.  The move of
     each vertex, ``d_i = x_i^new - x_i^old``, is kept in ``solver.vertex_length_correction`` for the
     velocity correction of :func:`end_substep` (0 on kinematic vertices).  A zero-length edge keeps the
     direction of the edge before it (the rest direction carried by the head at the root).
@@ -642,9 +687,14 @@ def follow_the_leader(use_colliders: ti.template(), model: ti.template(), solver
             direction = safe_normalized(e, fallback)
             fallback = direction
             if model.vertex_is_fixed[i] == 0:
-                p = x[i - 1] + model.edge_rest_length[i - 1] * direction
+                rest = model.edge_rest_length[i - 1]
+                p = x[i - 1] + rest * direction
                 if ti.static(use_colliders):
                     for c in range(cs.count_field[None]):
+                        if acts_on(cs, c, s):
+                            p = place_at_length_outside_collider(cs, c, x[i - 1], p, rest,
+                                                                 solver.vertex_collision_radius[i])
+                    for c in range(cs.count_field[None]):  # the last word is the colliders'
                         if acts_on(cs, c, s):
                             p = project_out_of_collider_normal(cs, c, p, solver.vertex_collision_radius[i])
                 solver.vertex_length_correction[i] = p - x[i]

@@ -491,12 +491,13 @@ class SolverShape(StageTimer):
         t0 = self._tock("shock", t0)
         for k in range(1, k_sub + 1):
             self._substep(state, control, k / k_sub, h, shock)
-        self.body_rotation_begin.copy_from(rot)
-        self.body_translation_begin.copy_from(tr)
         self.step_count += 1
         t0 = self._tick()
         if cfg.check_finite:
-            self.check_finite(state)
+            self.check_finite(state)  # raises with the state and the bodies' begin transforms kept
+        # The next step's substeps interpolate from this step's end.
+        self.body_rotation_begin.copy_from(rot)
+        self.body_translation_begin.copy_from(tr)
         self._tock("end", t0)
 
     def _substep(self, state: State, control: Control, u: float, h: float, shock: bool) -> None:

@@ -10,6 +10,7 @@ its Coulomb friction against the closed-form sliding of a strand on a slope.
 """
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -878,3 +879,22 @@ def test_step_allocates_no_fields(curly_rig, monkeypatch):
     for solver in solvers:
         for _ in range(3):
             solver.step(st, ctl, DT)
+
+
+def test_scene_file_solver_table_sets_the_shape_solver_fields(tmp_path):
+    """A scene file's [solver] table (type = "shape") sets SolverShapeConfig's fields, infinite threshold
+    included; a bad value is a SceneError naming the field."""
+    from taichi_hair.scene_file import SceneError, load_scene
+
+    groom = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "assets", "ponytail", "tail.tfx")
+    text = (f'[groom]\nfile = "{groom}"\nscale = 0.0035\nstrands = 4\n[solver]\ntype = "shape"\nsubsteps = 3\n'
+            f'follow_the_leader = false\nlength_velocity_correction = 0.5\nshock_propagation = 0.25\n'
+            f'shock_acceleration_threshold = inf\n[solver.region]\nlength_iterations = 4\n')
+    path = tmp_path / "shape.toml"
+    path.write_text(text)
+    cfg = load_scene(str(path)).solver_config
+    assert (cfg.substeps, cfg.follow_the_leader, cfg.length_velocity_correction, cfg.shock_propagation,
+            cfg.shock_acceleration_threshold, cfg.regions[0].length_iterations) == (3, False, 0.5, 0.25, math.inf, 4)
+    path.write_text(text.replace("substeps = 3", "substeps = 0"))
+    with pytest.raises(SceneError, match="substeps"):
+        load_scene(str(path))
