@@ -119,6 +119,20 @@ class ContactConfig:
             (``contacts.relinearize_contacts``; the paper keeps the
             begin-of-step linearisation, which measured up to 75 % edge stretch
             on the hairball's impact) [-].
+        correction_holds_lengths: the geometric correction holds every edge at the length it had
+            before the correction: each of its sweeps projects the 8 contact batches, then the edges
+            (two colours, mass-weighted position projections), and a last edge pass ends it
+            (``projection.correction_sweep``).  The paper's correction moves only the contact
+            vertices; at the end of a step with dense, fast contact (the hairball's impact) about a
+            fifth of the hair pairs have crossed by 0.1-2 mm, and pushing them back by their contact
+            vertices alone stretched the edges beside them by up to 18 % (measured,
+            ``benchmarks/probes/contact_length.py``) [-].
+        correction_max_iterations: after its ``correction_iterations`` sweeps the correction goes on, 5
+            sweeps at a time, while a contact is still deeper than ``correction_tolerance``, up to this
+            many sweeps in all (equal to ``correction_iterations``: the paper's fixed count) [-].
+        correction_tolerance: the deepest penetration the correction leaves without sweeping on [m];
+            0 means the largest hair radius of the model.  A hair pair counts its crossing depth
+            (``ContactPipeline.statistics``) [-].
         mass_splitting: how many virtual copies of a vertex the Delassus
             diagonal D_hat uses (Sec. 4.5 "Hybrid contact solve"): ``"vertex"``
             splits each vertex among all its contacts n_i (the paper's D_hat);
@@ -161,13 +175,16 @@ class ContactConfig:
     continuous_detections: int = 0
     mass_splitting: str = "batch"
     relinearize_correction: bool = True
+    correction_holds_lengths: bool = True
+    correction_max_iterations: int = 40
+    correction_tolerance: float = 0.0
     skip_when_apart: bool = True
     skip_slow_continuous: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):
             raise ValueError(f"ContactConfig.friction must be a finite number >= 0, got {self.friction!r}")
-        for name in ("margin", "velocity_margin"):
+        for name in ("margin", "velocity_margin", "correction_tolerance"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"ContactConfig.{name} must be a finite number >= 0, got {v!r}")
@@ -176,6 +193,9 @@ class ContactConfig:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= lo):
                 raise ValueError(f"ContactConfig.{name} must be an integer >= {lo}, got {v!r}")
+        if not (isinstance(self.correction_max_iterations, int) and self.correction_max_iterations >= 0):
+            raise ValueError("ContactConfig.correction_max_iterations must be an integer >= 0, got "
+                             f"{self.correction_max_iterations!r}")
         if self.mass_splitting not in ("batch", "vertex"):
             raise ValueError(f"ContactConfig.mass_splitting must be 'batch' or 'vertex', got {self.mass_splitting!r}")
         if not (math.isfinite(self.capacity_per_vertex) and self.capacity_per_vertex > 0):

@@ -206,6 +206,10 @@ class ContactFields:
         self.contact_collider = ti.field(ti.i32, c)
         #: Last local solve: 0 separating, 1 sticking, 2 sliding [-], shape (capacity,).
         self.contact_status = ti.field(ti.i32, c)
+        #: Penetration at the last statistics: -(signed gap) where the contact's sides overlap, else 0 [m];
+        #: a hair pair that crossed has its gap measured along the normal kept on the begin-of-step side,
+        #: so a crossing counts as more than r_a + r_b deep, shape (capacity,).
+        self.contact_penetration = ti.field(float, c)
         #: Number of contacts n_i touching vertex i [-], shape (vertex_count,).
         self.vertex_contact_count = ti.field(ti.i32, n)
         #: CSR of the contacts of each vertex, sorted by contact index: start [-], shape (vertex_count + 1,).

@@ -162,9 +162,8 @@ def clear_contact_terms(con: ti.template(), buf: ti.template()):
 
 @ti.func
 def begin_correction(x: ti.template(), con: ti.template()):
-    """Geometric correction: project x itself (z = x, fresh corrections, lambda_z ignored)."""
-    for k in range(con.active_vertex_count[None]):
-        i = con.active_vertex[k]
+    """Geometric correction: project x itself (z = x on every vertex, fresh corrections, lambda_z ignored)."""
+    for i in x:
         con.vertex_z[i] = x[i]
     nc = ti.min(con.contact_count[None], con.capacity)
     for c in range(nc):
@@ -172,21 +171,59 @@ def begin_correction(x: ti.template(), con: ti.template()):
 
 
 @ti.func
-def end_correction(x: ti.template(), con: ti.template()):
-    for k in range(con.active_vertex_count[None]):
-        i = con.active_vertex[k]
-        if con.vertex_contact_inv_weight[i] > 0.0:
+def end_correction(vertex: ti.template(), x: ti.template(), con: ti.template()):
+    """x = z on every free vertex (the edge-length passes may have moved vertices without contacts)."""
+    for i in x:
+        if vertex.vertex_is_fixed[i] == 0:
             x[i] = con.vertex_z[i]
+
+
+@ti.func
+def hold_edge_lengths(vertex: ti.template(), edge: ti.template(), z: ti.template(), length: ti.template(),
+                      colour: ti.template()):
+    """Project the edges of one colour (local edge index parity) back to their held lengths, mass-weighted.
+
+    Edge j joins vertices j and j+1; C = |z_{j+1} - z_j| - l_j moves them along the edge by
+    w_j / (w_j + w_{j+1}) C and w_{j+1} / (w_j + w_{j+1}) C, with w = 1/m (0 on kinematic vertices), the
+    position-based projection of an inextensibility constraint (Mueller et al. 2007).  Edges of one
+    colour share no vertex, so they are projected in parallel without atomics (bitwise reproducible).
+    """
+    for j in z:
+        if edge.edge_rest_length[j] > 0.0 and vertex.vertex_local_index[j] % 2 == colour:
+            wa = 0.0 if vertex.vertex_is_fixed[j] != 0 else 1.0 / vertex.vertex_mass[j]
+            wb = 0.0 if vertex.vertex_is_fixed[j + 1] != 0 else 1.0 / vertex.vertex_mass[j + 1]
+            d = z[j + 1] - z[j]
+            dn = d.norm()
+            if wa + wb > 0.0 and dn > 0.0:
+                corr = ((dn - length[j]) / ((wa + wb) * dn)) * d
+                z[j] += wa * corr
+                z[j + 1] -= wb * corr
+
+
+@ti.kernel
+def store_edge_lengths(edge: ti.template(), x: ti.template(), out_length: ti.template()):
+    """out_length_j = |x_{j+1} - x_j| on real edges (the lengths the correction holds) [m]."""
+    for j in x:
+        length = 0.0
+        if edge.edge_rest_length[j] > 0.0:
+            length = (x[j + 1] - x[j]).norm()
+        out_length[j] = length
 
 
 @ti.kernel
 def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(), con: ti.template(),
                        out: ti.template(), with_status: ti.template()):
-    """out = (sticking, sliding, separating) counts and the largest penetration [m] at the current x.
+    """Counts of the last projection and the penetrations of every contact at the current x.
 
-    Penetration of a hair-hair contact: r_a + r_b minus the distance of its two
-    (fixed-barycentric) contact points; of a body contact: r minus the signed
-    distance to the collider at the end-of-step transform.
+    out = (sticking, sliding, separating, deepest body penetration [m], deepest hair-pair penetration [m],
+    hair pairs crossed [-]); ``con.contact_penetration`` gets each contact's penetration.
+
+    Hair pair: the signed gap g = n . (p_a - p_b) - (r_a + r_b) at the contact's barycentric points with its
+    normal n, which points from b to a at the beginning of the step (or, after the correction's
+    re-linearisation, along the current closest points while the pair has not crossed); a pair that passed
+    through each other has n . (p_a - p_b) < 0, counts as crossed, and as penetrating by more than
+    r_a + r_b.  Body contact: r minus the signed distance to the collider (the solver's distance: exact for
+    planes, spheres and capsules, the voxel SDF for meshes) at the end-of-step transform.
     """
     nc = ti.min(con.contact_count[None], con.capacity)
     if ti.static(with_status):
@@ -194,6 +231,8 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
         out[1] = 0.0
         out[2] = 0.0
     out[3] = 0.0
+    out[4] = 0.0
+    out[5] = 0.0
     for c in range(nc):
         if ti.static(with_status):
             st = con.contact_status[c]
@@ -209,12 +248,17 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
         if k < 0:
             w = con.contact_weight[c]
             d = w[0] * x[vtx[0]] + w[1] * x[vtx[1]] + w[2] * x[vtx[2]] + w[3] * x[vtx[3]]
-            pen = radius[vtx[0]] + radius[vtx[2]] - d.norm()
+            side = con.contact_normal[c].dot(d)
+            pen = radius[vtx[0]] + radius[vtx[2]] - side
+            if side < 0.0:
+                ti.atomic_add(out[5], 1.0)
+            ti.atomic_max(out[4], pen)
         else:
             R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
             dist, nrm = collider_distance(cs, k, R.transpose() @ (x[vtx[0]] - T))
             pen = radius[vtx[0]] - dist
-        ti.atomic_max(out[3], pen)
+            ti.atomic_max(out[3], pen)
+        con.contact_penetration[c] = ti.max(pen, 0.0)
 
 
 @ti.kernel
@@ -239,9 +283,33 @@ def projection_sweep(con: ti.template()):
 
 
 @ti.kernel
-def projection_end(x: ti.template(), con: ti.template(), buf: ti.template(), correction: ti.template()):
-    """End a z-step: lambda_z += z - x and W_z for the global step (or, for the correction, x = z)."""
-    if ti.static(correction):
-        end_correction(x, con)
-    else:
-        update_contact_duals(x, con, buf)
+def correction_sweep(vertex: ti.template(), edge: ti.template(), con: ti.template(), length: ti.template()):
+    """One sweep of the length-holding geometric correction: the 8 contact batches, then both edge colours.
+
+    A Gauss-Seidel pass over contacts and inextensibility together, so a crossed pair pushed back drags
+    its strands' neighbouring vertices along instead of stretching the edges at the contact.
+    """
+    for batch in ti.static(range(BATCHES)):
+        solve_batch_contacts(con, con.vertex_z, batch)
+        apply_batch_corrections(con, con.vertex_z, batch)
+    for colour in ti.static(range(2)):
+        hold_edge_lengths(vertex, edge, con.vertex_z, length, colour)
+
+
+@ti.kernel
+def correction_end(vertex: ti.template(), x: ti.template(), con: ti.template()):
+    """End the geometric correction: x = z on the free vertices."""
+    end_correction(vertex, x, con)
+
+
+@ti.kernel
+def projection_end(x: ti.template(), con: ti.template(), buf: ti.template()):
+    """End a z-step: lambda_z += z - x and W_z for the global step."""
+    update_contact_duals(x, con, buf)
+
+
+@ti.kernel
+def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), con: ti.template(), length: ti.template()):
+    """Both edge colours once more, after the last contact sweep of the correction."""
+    for colour in ti.static(range(2)):
+        hold_edge_lengths(vertex, edge, con.vertex_z, length, colour)
