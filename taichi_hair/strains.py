@@ -281,6 +281,42 @@ def stretch_energy(eps: float, stiffness: float) -> float:
 
 # --------------------------------------------------------------------------- 6x6 LDL^T
 @ti.func
+def ldlt_factor6(H: mat6):
+    """LDL^T factors (L unit lower, D diagonal) of a symmetric positive definite 6x6 H, without pivoting."""
+    L = mat6(0.0)
+    D = vec6(0.0)
+    for j in ti.static(range(6)):
+        s = H[j, j]
+        for k in ti.static(range(j)):
+            s -= L[j, k] * L[j, k] * D[k]
+        D[j] = s
+        for i in ti.static(range(j + 1, 6)):
+            t = H[i, j]
+            for k in ti.static(range(j)):
+                t -= L[i, k] * L[j, k] * D[k]
+            L[i, j] = t / s
+    return L, D
+
+
+@ti.func
+def ldlt_substitute6(L: mat6, D: vec6, b: vec6) -> vec6:
+    """x with L D L^T x = b, from the factors of :func:`ldlt_factor6`."""
+    y = vec6(0.0)
+    for i in ti.static(range(6)):
+        s = b[i]
+        for k in ti.static(range(i)):
+            s -= L[i, k] * y[k]
+        y[i] = s
+    x = vec6(0.0)
+    for i in ti.static(range(5, -1, -1)):
+        s = y[i] / D[i]
+        for k in ti.static(range(i + 1, 6)):
+            s -= L[k, i] * x[k]
+        x[i] = s
+    return x
+
+
+@ti.func
 def ldlt_solve6(H: mat6, b: vec6) -> vec6:
     """Solve H x = b for symmetric positive definite H by LDL^T without pivoting (Sec. 4.4)."""
     L = mat6(0.0)

@@ -277,7 +277,10 @@ def test_mesh_sdf_matches_the_analytic_distance_and_orientation():
     assert np.all(np.sign(d[np.abs(exact) > 2 * col.spacing]) == np.sign(exact[np.abs(exact) > 2 * col.spacing]))
 
 
-def test_non_watertight_mesh_warns_and_uses_an_unsigned_shell():
+def test_non_watertight_mesh_warns_and_is_signed_by_its_winding_number():
+    """A half sphere (an open bowl) is not watertight: it is signed by its generalized winding number
+    (issue 12 item 4; the flat-sheet fallback and holed meshes are tested in test_quality.py), so a point
+    far outside is outside and one just under the bowl's surface, inside the sphere it came from, is inside."""
     import trimesh
 
     sphere = trimesh.creation.icosphere(3, 0.01)
@@ -285,7 +288,12 @@ def test_non_watertight_mesh_warns_and_uses_an_unsigned_shell():
     with pytest.warns(UserWarning, match="not watertight"):
         col = MeshCollider(open_mesh, resolution=32, thickness=5e-4)
     assert not col.watertight
-    assert col.sdf.min() >= -5e-4 - 1e-9   # no "inside": at worst the shell thickness
+    assert col.sign_method == "winding"
+    far = np.array([[0.0, 0.0, 0.03], [0.03, 0.0, 0.0]])
+    assert np.all(col.sdf_numpy(far) > 0)
+    tri = open_mesh.vertices[open_mesh.faces].mean(axis=1)
+    under = 0.0095 * tri.mean(axis=0) / np.linalg.norm(tri.mean(axis=0))   # 0.5 mm under the bowl's middle
+    assert col.sdf_numpy(under[None])[0] < 0
 
 
 def test_bad_collider_parameters_name_the_field():
