@@ -17,7 +17,8 @@ distribution of the edge strain |l / l0 - 1| at the end (p50, p99, max, and the 
 
 ``--scheme defaults`` (the default) runs SolverShapeConfig's shipped defaults (substeps, the
 follow-the-leader pass and its velocity correction); ``--scheme paper`` the paper's scheme alone
-(one pass of Algorithm 1 per step, no follow-the-leader), the solver as it was before those.
+(one pass of Algorithm 1 per step, no follow-the-leader, no shock propagation), the solver as it
+was before those.
 
 Usage:
     python benchmarks/bench_shape.py [--arch cpu|cuda] [--sizes 20000x11,20000x64] [--methods 1,2,3]
@@ -57,7 +58,8 @@ def groom(th, strands, vertices):
 
 
 #: SolverShapeConfig fields of each --scheme (the others are the config's defaults).
-SCHEMES = {"defaults": {}, "paper": {"substeps": 1, "follow_the_leader": False}}
+SCHEMES = {"defaults": {},
+           "paper": {"substeps": 1, "follow_the_leader": False, "shock_acceleration_threshold": float("inf")}}
 
 
 def bench_size(th, ti, strands, vertices, methods, steps, scheme="defaults"):

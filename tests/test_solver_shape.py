@@ -25,9 +25,9 @@ DT = 1.0 / 60.0
 #: SolverShapeConfig fields a test may set through Rig.configure (the others are fixed per rig).
 OPTIONS = ("substeps", "follow_the_leader", "length_velocity_correction", "shock_propagation",
            "shock_acceleration_threshold")
-#: One pass of the paper's Algorithm 1 per step, without the substeps and the follow-the-leader pass:
-#: for the tests of one of its stages alone (the collision stage, the iterated length constraints).
-PAPER = dict(substeps=1, follow_the_leader=False)
+#: One pass of the paper's Algorithm 1 per step, without the substeps, the shock propagation and the
+#: follow-the-leader pass: for the tests of one of its stages alone (collisions, iterated length constraints).
+PAPER = dict(substeps=1, follow_the_leader=False, shock_acceleration_threshold=math.inf)
 
 
 def curly(n=16, length=0.2, radius=0.02, pitch=0.06, origin=(0.0, 0.0, 0.0), phase=0.0):
