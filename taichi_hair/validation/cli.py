@@ -54,10 +54,12 @@ def _validate_stick_slip(args, arch) -> int:
         if not args.quiet:
             print(f"  substep {j:4d}: clamp displacement {d:.3f} L, {n} rods have slid", flush=True)
 
+    gravity = 0.0 if args.weightless else 9.81
     if not args.quiet:
-        print(f"stick-slip: 13 friction coefficients 0..0.6, 800 quasistatic substeps to 0.6 L, arch {arch}, "
-              f"{args.precision}")
-    result = run_stick_slip(substeps=args.substeps, progress=progress)
+        print(f"stick-slip: friction coefficients 0..0.6 in steps of 0.05 and of 0.01 around the reference mu_c, "
+              f"{args.substeps} quasistatic substeps to 0.6 L, gravity {gravity:g} m/s^2 (reference with the same "
+              f"weight), arch {arch}, {args.precision}")
+    result = run_stick_slip(substeps=args.substeps, gravity=gravity, progress=progress)
     csv_path, png_path = write_outputs(result, args.out)
     print(format_summary(result))
     print(f"wrote {csv_path} and {png_path}")
@@ -123,6 +125,8 @@ def register(sub) -> None:
     v.add_argument("--strain-measure", default="korner", choices=["korner", "bergou"])
     v.add_argument("--no-voronoi-rescaling", action="store_true", help="disable the Sec. 5.1 boundary rescaling")
     v.add_argument("--substeps", type=int, default=800, help="stick-slip: quasistatic substeps to 0.6 L")
+    v.add_argument("--weightless", action="store_true",
+                   help="stick-slip: gravity off, against the weightless elastica (default: the rod's weight in both)")
     v.add_argument("--steps", type=int, default=2500, help="bend-twist: damped dynamic steps")
     v.add_argument("--tilt-steps", type=int, default=100, help="bend-twist: first steps with tilted gravity")
     v.add_argument("--iterations", type=int, default=50, help="bend-twist: ADMM iterations per step")
