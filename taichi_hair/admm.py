@@ -32,6 +32,7 @@ vec3 = ti.math.vec3
 @ti.kernel
 def begin_step(
     dynamic: ti.template(),
+    bdf2: ti.template(),
     vertex: ti.template(),
     edge: ti.template(),
     body_rotation: ti.template(),
@@ -40,39 +41,70 @@ def begin_step(
     vs: ti.template(),
     es: ti.template(),
     buf: ti.template(),
-    dt: float,
+    h: float,
 ):
-    """Store x^t, v^t, theta^t, omega^t; advect the initial guess (Algorithm 1, line 2); move roots.
+    """Store x^t, v^t, theta^t, omega^t and the step's origins; advect the initial guess (Algorithm 1,
+    line 2) to the inertial predictor x_pred = x_hat + h v_hat; move roots.
 
+    Backward Euler (``bdf2`` False, h = dt): x_hat = x_n, v_hat = v_n.  BDF2 (h = 2 dt / 3):
+    x_hat = (4 x_n - x_{n-1}) / 3 and v_hat = (4 v_n - v_{n-1}) / 3, with x_{n-1}, v_{n-1} read from
+    the begin buffers before they are overwritten (they hold the last step's begin state).
     Kinematic vertices go straight to the body transform of the end of the
     step: x = R_b x_body + T_b.
     """
     for i in vs.vertex_position:
         x = vs.vertex_position[i]
         v = vs.vertex_velocity[i]
+        th = es.edge_twist[i]
+        om = es.edge_angular_velocity[i]
+        x_hat, v_hat, th_hat, om_hat = x, v, th, om
+        if ti.static(bdf2):
+            x_hat = (4.0 * x - buf.vertex_position_begin[i]) / 3.0
+            v_hat = (4.0 * v - buf.vertex_velocity_begin[i]) / 3.0
+            th_hat = (4.0 * th - buf.edge_twist_begin[i]) / 3.0
+            om_hat = (4.0 * om - buf.edge_angular_velocity_begin[i]) / 3.0
         buf.vertex_position_begin[i] = x
         buf.vertex_velocity_begin[i] = v
+        buf.vertex_position_origin[i] = x_hat
+        buf.vertex_velocity_origin[i] = v_hat
         if vertex.vertex_is_fixed[i] != 0:
             b = strand.strand_body[vertex.vertex_strand[i]]
             vs.vertex_position[i] = body_rotation[b] @ vertex.vertex_body_position[i] + body_translation[b]
         elif ti.static(dynamic):
-            vs.vertex_position[i] = x + dt * v
-        th = es.edge_twist[i]
-        om = es.edge_angular_velocity[i]
+            vs.vertex_position[i] = x_hat + h * v_hat
         buf.edge_twist_begin[i] = th
         buf.edge_angular_velocity_begin[i] = om
+        buf.edge_twist_origin[i] = th_hat
+        buf.edge_angular_velocity_origin[i] = om_hat
         if ti.static(dynamic):
             if edge.edge_is_fixed[i] == 0:
-                es.edge_twist[i] = th + dt * om
+                es.edge_twist[i] = th_hat + h * om_hat
 
 
 @ti.kernel
-def end_step(dynamic: ti.template(), vs: ti.template(), es: ti.template(), buf: ti.template(), dt: float):
-    """Backward Euler velocities v = (x - x^t)/dt, omega = (theta - theta^t)/dt (zero if quasistatic)."""
+def bdf2_strain_origin(bdf2: ti.template(), buf: ti.template()):
+    """Strain-rate origins of a BDF2 run: kappa_hat = (4 kappa_n - kappa_{n-1}) / 3 (and eps_hat) in
+    place of kappa_n in ``pair_kappa_begin``, so that the local step's damping
+    c (kappa - kappa_hat) with c = tau / h is tau kappa_dot of BDF2; kappa_n kept for the next step.
+    A backward Euler step of a BDF2 run (``bdf2`` False: no history) only keeps kappa_n."""
+    for i in buf.pair_kappa_begin:
+        k = buf.pair_kappa_begin[i]
+        e = buf.edge_strain_begin[i]
+        if ti.static(bdf2):
+            buf.pair_kappa_begin[i] = (4.0 * k - buf.pair_kappa_previous[i]) / 3.0
+            buf.edge_strain_begin[i] = (4.0 * e - buf.edge_strain_previous[i]) / 3.0
+        buf.pair_kappa_previous[i] = k
+        buf.edge_strain_previous[i] = e
+
+
+@ti.kernel
+def end_step(dynamic: ti.template(), vs: ti.template(), es: ti.template(), buf: ti.template(), h: float):
+    """Velocities of the step, v = (x - x_hat)/h, omega = (theta - theta_hat)/h (zero if quasistatic):
+    (x - x^t)/dt for backward Euler, (3 x - 4 x_n + x_{n-1}) / (2 dt) for BDF2."""
     for i in vs.vertex_position:
         if ti.static(dynamic):
-            vs.vertex_velocity[i] = (vs.vertex_position[i] - buf.vertex_position_begin[i]) / dt
-            es.edge_angular_velocity[i] = (es.edge_twist[i] - buf.edge_twist_begin[i]) / dt
+            vs.vertex_velocity[i] = (vs.vertex_position[i] - buf.vertex_position_origin[i]) / h
+            es.edge_angular_velocity[i] = (es.edge_twist[i] - buf.edge_twist_origin[i]) / h
         else:
             vs.vertex_velocity[i] = vec3(0.0)
             es.edge_angular_velocity[i] = 0.0
@@ -159,11 +191,11 @@ def assemble_position_at(
         if ti.static(dynamic):
             inv_dt = 1.0 / dt
             diag += m * inv_dt * inv_dt
-            x_pred = buf.vertex_position_begin[i] + dt * buf.vertex_velocity_begin[i]
+            x_pred = buf.vertex_position_origin[i] + dt * buf.vertex_velocity_origin[i]
             f -= m * inv_dt * inv_dt * (x[i] - x_pred)
             xi = air_viscosity * vertex.vertex_voronoi_length[i]
             diag += xi * inv_dt
-            f -= xi * ((x[i] - buf.vertex_position_begin[i]) * inv_dt - air_velocity)
+            f -= xi * ((x[i] - buf.vertex_position_origin[i]) * inv_dt - air_velocity)
         # Edge (i-1, i): weight from pairs i-1 and i.
         lower = 0.0
         if vertex.vertex_local_index[i] > 0:
@@ -219,6 +251,10 @@ def assemble_position_system(
     B^T W_y B is an edge Laplacian whose edge weight is the sum of the weights
     of the (one or two) pairs containing the edge.  Kinematic vertices get an
     identity row and no coupling (the projections Pi_A of Eq. 3).
+
+    Dynamic mode: ``dt`` is the integrator's inertia step h (dt for backward Euler, 2 dt / 3 for
+    BDF2), giving the inertia M (x - x_pred) / h^2 and the air drag xi ((x - x_hat) / h - v_air)
+    with x_pred, x_hat from :func:`begin_step` (``buf.vertex_*_origin``).
     """
     for i in x:
         assemble_position_at(i, dynamic, vertex, edge, pair, x, buf, gravity, air_velocity, air_viscosity, dt)
@@ -334,7 +370,7 @@ def assemble_twist_at(
         if ti.static(dynamic):
             inertia = edge.edge_rotational_inertia[j] / (dt * dt)
             diag += inertia
-            pred = buf.edge_twist_begin[j] + dt * buf.edge_angular_velocity_begin[j]
+            pred = buf.edge_twist_origin[j] + dt * buf.edge_angular_velocity_origin[j]
             g += inertia * (theta[j] - pred)
         buf.tri_lower[j] = lower
         buf.tri_diag[j] = diag
@@ -355,6 +391,7 @@ def assemble_twist_system(
 
     Edge j is the second edge of pair j and the first edge of pair j+1.
     Kinematic twists (clamped root edge, ghost edge) get identity rows.
+    Dynamic mode: ``dt`` is the inertia step h, as in :func:`assemble_position_system`.
     """
     for j in theta:
         assemble_twist_at(j, dynamic, edge, pair, theta, buf, dt)

@@ -67,9 +67,10 @@ def _named_scene(args):
 
     d = {k: (getattr(args, k) if getattr(args, k) is not None else v) for k, v in NAMED_DEFAULTS.items()}
     iterations = d["iterations"]
+    integ = dict(integrator=args.integrator) if args.integrator else {}
     if args.scene == "hang":
         hs = HangScene(strands=d["strands"], length=args.length if args.length else 0.2, seed=d["seed"])
-        cfg = SolverADMMConfig(iterations=iterations, mode="dynamic")
+        cfg = SolverADMMConfig(iterations=iterations, mode="dynamic", **integ)
         colliders = []
         body = BodyAnimation(function=lambda t: nod_rotation(hs, t), description={"preset": "hang-nod"})
         builder = (lambda: build_hang(hs))
@@ -78,7 +79,7 @@ def _named_scene(args):
         hs = HairballScene(strands=d["strands"], length=args.length if args.length else 0.30, seed=d["seed"])
         contacts = ContactConfig(friction=hs.friction, projection_iterations=2, correction_iterations=10,
                                  continuous_detections=args.continuous or 0)
-        cfg = SolverADMMConfig(iterations=iterations, mode="dynamic", contacts=contacts)
+        cfg = SolverADMMConfig(iterations=iterations, mode="dynamic", contacts=contacts, **integ)
         from .colliders import SphereCollider
 
         colliders = [SphereCollider(radius=hs.ball_radius, friction=hs.friction, body=0)]
@@ -86,7 +87,7 @@ def _named_scene(args):
         builder = (lambda: build_hairball(hs))
         scene_desc = dict(vars(hs), continuous=args.continuous or 0)
     desc = {"name": args.scene, "params": scene_desc, "iterations": iterations, "fps": d["fps"],
-            "substeps": d["substeps"]}
+            "substeps": d["substeps"], **integ}
     return Scene(name=args.scene, path="", frames=d["frames"], fps=d["fps"], substeps=d["substeps"],
                  gravity=(0.0, -9.81, 0.0), groom=None, solver="admm", solver_config=cfg, colliders=colliders,
                  bodies=[body], description=desc, model_builder=builder)
@@ -103,7 +104,7 @@ def _load_scene(args):
 
     over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
                 length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous,
-                vertices_per_strand=args.vertices_per_strand)
+                vertices_per_strand=args.vertices_per_strand, integrator=args.integrator)
     return load_scene(args.scene, over)
 
 
@@ -237,7 +238,9 @@ def cmd_simulate(args) -> int:
     if admm:
         snapshot = state.to_numpy()
         try:
-            solver.step(state, control, dt)
+            # BDF2: the first step is backward Euler (no history), the second compiles the BDF2 kernels.
+            for _ in range(2 if getattr(scene.solver_config, "integrator", "") == "bdf2" else 1):
+                solver.step(state, control, dt)
         except SimulationDivergedError as exc:
             diverged = f"frame 1: {exc}"
         state.load(snapshot)
@@ -611,6 +614,9 @@ def register(sub) -> None:
     s.add_argument("--substeps", type=int, default=None, help="solver steps per frame (default 4 or the scene's)")
     s.add_argument("--iterations", type=int, default=None,
                    help="solver iterations per substep (ADMM default 10, or the scene's)")
+    s.add_argument("--integrator", choices=("backward_euler", "bdf2"), default=None,
+                   help="admm time integrator (default the scene's, else backward_euler; bdf2 is second order "
+                        "and keeps a swing's energy, SolverADMMConfig.integrator)")
     s.add_argument("--seed", type=int, default=None,
                    help="random seed of a procedural groom (default: the scene's, or 0)")
     s.add_argument("--vertices-per-strand", type=int, default=None,

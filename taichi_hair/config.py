@@ -84,6 +84,7 @@ TRIDIAGONAL_METHODS = ("auto", "thomas", "pcr")
 DUAL_FRAMES = ("root", "pair", "none")
 SCHEDULES = ("auto", "stage", "strand")
 TWIST_MODES = ("auto", "solve")
+INTEGRATORS = ("backward_euler", "bdf2")
 
 
 @dataclass
@@ -208,9 +209,20 @@ class SolverADMMConfig:
 
     Attributes:
         iterations: ADMM iterations per step (Algorithm 1's loop) [-].
-        mode: ``"dynamic"`` (backward Euler, Sec. 4.2) or ``"quasistatic"``
-            (inertia and drag dropped; each call to ``step`` runs more
-            iterations of the same minimisation).
+        mode: ``"dynamic"`` (implicit time integration, Sec. 4.2; see
+            ``integrator``) or ``"quasistatic"`` (inertia and drag dropped;
+            each call to ``step`` runs more iterations of the same minimisation).
+        integrator: time discretisation of the dynamic mode [-]:
+            ``"backward_euler"`` (the paper's, first order; its numerical
+            damping takes most of a slow swing's energy at dt = 1/96 s,
+            BENCHMARKS.md) or ``"bdf2"`` (second-order backward
+            differentiation, v_{n+1} = (3 x_{n+1} - 4 x_n + x_{n-1}) / (2 dt):
+            the same ADMM step with the inertia term M (x - x_pred) / h^2,
+            h = 2 dt / 3; see :class:`taichi_hair.SolverADMM`).  BDF2 falls
+            back to backward Euler on a step without history: the first
+            step, after ``reset_duals``/``reset_history`` (teleport, state
+            load), after a failed step, or when dt changes.  Ignored in the
+            quasistatic mode.
         strain_measure: ``"korner"`` (Korner et al. 2021: bending from the
             rotation between adjacent material frames, 2 sin(phi/2);
             hyperelastic stretch) or ``"bergou"`` (Bergou et al. 2008:
@@ -269,8 +281,11 @@ class SolverADMMConfig:
     check_finite: bool = True
     contacts: ContactConfig | None = None
     twist: str = "auto"
+    integrator: str = "backward_euler"
 
     def __post_init__(self):
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"SolverADMMConfig.integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if self.twist not in TWIST_MODES:
             raise ValueError(f"SolverADMMConfig.twist must be one of {TWIST_MODES}, got {self.twist!r}")
         if isinstance(self.contacts, dict):

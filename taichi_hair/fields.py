@@ -126,15 +126,30 @@ class SolverBuffers:
     """Scratch and history of SolverADMM.  Shape (vertex_count,) unless stated."""
 
     def __init__(self, n: int):
-        #: Begin-of-step positions x^t [m] and velocities v^t [m/s].
+        #: Begin-of-step positions x^t [m] and velocities v^t [m/s].  Between two steps they hold
+        #: those of the last step, x_{n-1} and v_{n-1}: the BDF2 history (``SolverADMM.checkpoint``).
         self.vertex_position_begin = ti.field(vec3, n)
         self.vertex_velocity_begin = ti.field(vec3, n)
-        #: Begin-of-step twists theta^t [rad] and angular velocities omega^t [rad/s].
+        #: Begin-of-step twists theta^t [rad] and angular velocities omega^t [rad/s]; between steps
+        #: theta_{n-1} and omega_{n-1} (BDF2 history), as above.
         self.edge_twist_begin = ti.field(float, n)
         self.edge_angular_velocity_begin = ti.field(float, n)
-        #: Begin-of-step strains for strain-rate damping: kappa^t [-] and eps^t [-].
+        #: Origin of the step's velocity, v_{n+1} = (x - x_hat) / h [m], and the velocity of the inertial
+        #: predictor x_pred = x_hat + h v_hat [m/s]: x_hat = x^t, v_hat = v^t for backward Euler,
+        #: (4 x_n - x_{n-1}) / 3 and (4 v_n - v_{n-1}) / 3 for BDF2 (``admm.begin_step``).
+        self.vertex_position_origin = ti.field(vec3, n)
+        self.vertex_velocity_origin = ti.field(vec3, n)
+        #: The same for the twists: theta_hat [rad] and omega_hat [rad/s].
+        self.edge_twist_origin = ti.field(float, n)
+        self.edge_angular_velocity_origin = ti.field(float, n)
+        #: Origin of the strain rates of strain-rate damping, kappa_dot = (kappa - kappa_hat) / h:
+        #: kappa_hat [-] and eps_hat [-] (kappa^t, eps^t for backward Euler; (4 kappa_n - kappa_{n-1}) / 3
+        #: for BDF2, ``admm.bdf2_strain_origin``).
         self.pair_kappa_begin = ti.field(vec3, n)
         self.edge_strain_begin = ti.field(float, n)
+        #: BDF2 only: the begin-of-step strains of the last step, kappa_{n-1} [-] and eps_{n-1} [-].
+        self.pair_kappa_previous = ti.field(vec3, n)
+        self.edge_strain_previous = ti.field(float, n)
         #: Force of pair i on the global step, W_y (lambda + y - Bx)_i, world frame [N].
         self.pair_force = ti.field(vec6, n)
         #: Scaled dual lambda_y [m], in the root-attachment frame Q^t when enabled.

@@ -37,6 +37,7 @@ degrees; relative paths are relative to the scene file)::
     [solver]
     type = "admm"                # "admm" (Daviet 2023, the main solver), "shape" (Han & Harada) or "xpbd"
     iterations = 10              # and any other field of that solver's config dataclass
+    integrator = "bdf2"          # admm: "backward_euler" (default, the paper's) or "bdf2" (second order)
     # shape (SolverShapeConfig): substeps = 2 (per scene substep), follow_the_leader = true,
     # length_velocity_correction = 1.0, shock_propagation = 0.0, shock_acceleration_threshold = 50.0 [m/s^2]
     [solver.contacts]            # admm: ContactConfig fields; the table turns hair-hair contacts on
@@ -657,6 +658,10 @@ def _solver(t: _Table, overrides: dict, colliders: list):
                "local_iterations / length_iterations for \"shape\"", "type")
     if "iterations" in overrides:
         values["iterations"] = overrides["iterations"]
+    if overrides.get("integrator"):
+        if kind != "admm":
+            t.fail(f"--integrator applies to type = \"admm\", not {kind!r}", "type")
+        values["integrator"] = overrides["integrator"]
     desc = {"type": kind, **{k: v for k, v in values.items()}}
     if kind == "admm":
         contacts = t.get("contacts", "table", None)
@@ -699,7 +704,7 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         path: the ``.toml`` file.
         overrides: command-line values that replace the file's: ``frames``, ``fps``, ``substeps``,
             ``strands`` (generator count, or the strands kept from a file), ``length``, ``seed`` and
-            ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``continuous`` (admm
+            ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``integrator`` (admm), ``continuous`` (admm
             contact detections).
 
     Raises:

@@ -3,7 +3,7 @@
 Per step (Sec. 4.2):
 
 1. collision detection                       -- ``contacts.ContactPipeline.detect`` (grid.py, contacts.py; Sec. 4.5)
-2. advect the initial guess x <- x^t + dt v  -- ``admm.begin_step``
+2. advect the initial guess x <- x_pred      -- ``admm.begin_step`` (x^t + dt v^t; BDF2 below)
 3. update DER frames                         -- ``frames.update_reference_frames``
 4. for each ADMM iteration:
    a. local elasticity solve -> y           -- ``elasticity.solve_local_elasticity`` (Sec. 4.4)
@@ -18,6 +18,32 @@ Per step (Sec. 4.2):
       every rod is naturally straight and round: ``fidelity.twist_choice``)
 5. optional geometric contact correction     -- ``ContactPipeline.correct`` (projection on x itself)
 6. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
+
+Time integration (``SolverADMMConfig.integrator``): the paper's backward Euler,
+or BDF2, v_{n+1} = (3 x_{n+1} - 4 x_n + x_{n-1}) / (2 dt).  BDF2 is the same
+incremental problem with another inertia term: writing v_{n+1} = (x - x_hat) / h
+with h = 2 dt / 3 and x_hat = (4 x_n - x_{n-1}) / 3, the momentum balance
+M (v_{n+1} - v_hat) / h = F(x), v_hat = (4 v_n - v_{n-1}) / 3, is
+M (x - x_pred) / h^2 = F(x) with x_pred = x_hat + h v_hat -- backward Euler's
+form with (dt, x^t, v^t) replaced by (h, x_hat, v_hat) (likewise theta, omega with
+the rotational inertia).  So ``begin_step`` writes x_hat, v_hat into origin
+buffers, the assembly reads them with h in place of dt, and ``end_step`` sets
+v = (x - x_hat) / h.  The dissipative terms use the same BDF2 rate:
+  * air drag xi (v - v_air) with v = (x - x_hat) / h (the drag is a force at t_{n+1},
+    evaluated with the step's own velocity, as backward Euler does with (x - x^t) / dt);
+  * strain-rate damping tau K kappa_dot (Sec. 4.4), with kappa_dot = (kappa - kappa_hat) / h,
+    kappa_hat = (4 kappa_n - kappa_{n-1}) / 3 (``admm.bdf2_strain_origin``): the local step's
+    c (kappa - kappa_begin) with c = tau * damping_scale, damping_scale = 1 / h (1 / dt for
+    backward Euler).  Damping stays second-order consistent, so a damped rod converges at
+    second order too.
+x_{n-1}, v_{n-1}, theta_{n-1}, omega_{n-1} are the begin buffers of the last step
+(read by ``begin_step`` before it overwrites them); kappa_{n-1}, eps_{n-1} sit in
+``pair_kappa_previous``/``edge_strain_previous``.  A step without that history
+-- the first one, one after ``reset_history``/``reset_duals`` or ``restore`` of a
+checkpoint without it, after a failed step, or with another dt -- is a backward
+Euler step (it then makes the history).  The contact weights W_z and the
+detection margins keep the physical dt (they set ADMM's convergence and the
+reach of a step, not the discretisation).
 
 With contacts the strand schedule runs one iteration per launch, the z-step
 between launches (it couples strands); y and z both depend on x only, so
@@ -57,6 +83,9 @@ from .tridiag import TridiagonalSolver
 STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "iterations", "correction", "end")
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
+#: Solver buffers that hold the BDF2 history between steps (saved by ``SolverADMM.checkpoint``).
+_HISTORY_FIELDS = ("vertex_position_begin", "vertex_velocity_begin", "edge_twist_begin",
+                   "edge_angular_velocity_begin", "pair_kappa_previous", "edge_strain_previous")
 
 
 class SolverADMM(StageTimer):
@@ -130,6 +159,9 @@ class SolverADMM(StageTimer):
         self.stage_seconds = {k: 0.0 for k in STAGES}
         self.step_count = 0
         self.iteration_count = 0
+        #: dt [s] of the last completed dynamic step when the BDF2 history (the begin buffers and
+        #: ``pair_kappa_previous``) is that step's; None when the next step has no history.
+        self._history_dt = None
 
     # ------------------------------------------------------------------ set-up
     def _set_coefficients(self) -> None:
@@ -210,7 +242,12 @@ class SolverADMM(StageTimer):
             raise ValueError(f"SolverADMM.step: dt must be a finite positive number, got {dt!r}")
         m, b, cfg = self.model, self.buf, self.config
         dyn = self.dynamic
-        damping_scale = 1.0 / dt if dyn else 0.0
+        bdf2_run = dyn and cfg.integrator == "bdf2"
+        # BDF2 needs the last step's state at the same dt; otherwise a backward Euler step.
+        bdf2 = bdf2_run and self._history_dt == dt
+        self._history_dt = None  # until this step has completed
+        h = 2.0 * dt / 3.0 if bdf2 else dt  # inertia step: M (x - x_pred) / h^2 (module docstring)
+        damping_scale = 1.0 / h if dyn else 0.0
         g = ti.math.vec3(*control.gravity)
         v_air = ti.math.vec3(*control.air_velocity)
 
@@ -225,7 +262,9 @@ class SolverADMM(StageTimer):
         # Begin-of-step strains for strain-rate damping (Sec. 4.4), then advect (Alg. 1 l.2).
         admm.compute_strains(self.measure, m, m, state.vertex_position, state.edge_twist, state,
                              b.pair_kappa_begin, b.edge_strain_begin)
-        admm.begin_step(dyn, m, m, control.body_rotation, control.body_translation, m, state, state, b, dt)
+        if bdf2_run:
+            admm.bdf2_strain_origin(bdf2, b)
+        admm.begin_step(dyn, bdf2, m, m, control.body_rotation, control.body_translation, m, state, state, b, h)
         if not cfg.warm_start_duals:
             admm.reset_duals(b)
         t0 = self._tock("begin", t0)
@@ -236,7 +275,7 @@ class SolverADMM(StageTimer):
             # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
             admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                    control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
-                                   v_air, cfg.air_viscosity, dt, damping_scale, cfg.iterations)
+                                   v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations)
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
         elif self.schedule == "strand":
@@ -251,11 +290,11 @@ class SolverADMM(StageTimer):
                 t0 = self._tock("projection", t0)
                 admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                        control.body_rotation, state.vertex_position, state.edge_twist, state, b,
-                                       g, v_air, cfg.air_viscosity, dt, damping_scale, 1)
+                                       g, v_air, cfg.air_viscosity, h, damping_scale, 1)
                 t0 = self._tock("iterations", t0)
                 self.iteration_count += 1
         else:
-            t0 = self._iterations_stage(state, control, dt, g, v_air, damping_scale, t0)
+            t0 = self._iterations_stage(state, control, h, g, v_air, damping_scale, t0)
 
         if con is not None:
             con.count_status(state.vertex_position)
@@ -270,17 +309,21 @@ class SolverADMM(StageTimer):
         if self.twist_free:
             # theta of the twist-free frames, once per step (the iterations only need the frames).
             update_twist_free_frames(m, m, state.edge_twist, state, True)
-        admm.end_step(dyn, state, state, b, dt)
+        admm.end_step(dyn, state, state, b, h)
         self.step_count += 1
         if cfg.check_finite:
             self.check_finite(state)
+        if bdf2_run:
+            self._history_dt = dt
         if con is not None:
             self.contact_stats = con.statistics(state.vertex_position)
         self._tock("end", t0)
 
     def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
                           t0: float) -> float:
-        """Step 4 of Algorithm 1, "stage" schedule: a few kernels per iteration, each over all vertices."""
+        """Step 4 of Algorithm 1, "stage" schedule: a few kernels per iteration, each over all vertices.
+
+        ``dt`` is the integrator's inertia step h (dt, or 2 dt / 3 for a BDF2 step)."""
         m, b, cfg = self.model, self.buf, self.config
         dyn = self.dynamic
         con = self.contacts
@@ -334,7 +377,8 @@ class SolverADMM(StageTimer):
         """What the solver modelled and skipped so far, in words, by topic (:mod:`taichi_hair.fidelity`)."""
         rep = dict(self.model_choices)
         rep["mode"] = ("quasistatic: inertia and damping dropped" if not self.dynamic
-                       else "dynamic (backward Euler)")
+                       else "dynamic (BDF2, backward Euler on steps without history)"
+                       if self.config.integrator == "bdf2" else "dynamic (backward Euler)")
         con = self.contacts
         if con is None:
             rep["contacts"] = "no contacts"
@@ -366,19 +410,33 @@ class SolverADMM(StageTimer):
             raise SimulationDivergedError(code // 4, _FIELD_NAMES[code % 4], self.step_count)
 
     def reset_duals(self) -> None:
-        """Forget the warm-started elasticity multipliers (e.g. after a teleport)."""
+        """Forget what the solver carries from step to step for the state it stepped: the warm-started
+        elasticity multipliers and the BDF2 history (:meth:`reset_history`); call it after a teleport
+        or after loading another state."""
         admm.reset_duals(self.buf)
+        self.reset_history()
+
+    def reset_history(self) -> None:
+        """Forget the BDF2 history: the next step is a backward Euler step (then BDF2 again)."""
+        self._history_dt = None
 
     def checkpoint(self) -> dict:
         """What the solver carries from one step to the next, as NumPy arrays.
 
         Together with ``State.to_numpy()`` this is everything a later step
         depends on: the warm-started elasticity duals lambda_y and the forces
-        they give, and the step/iteration counters.  Contacts are detected
-        afresh each step, so they hold nothing across steps.
+        they give, the step/iteration counters, and the BDF2 history (x_{n-1},
+        v_{n-1}, theta_{n-1}, omega_{n-1}, kappa_{n-1}, eps_{n-1} and the dt it was
+        made at; NaN when there is none).  Contacts are detected afresh each
+        step, so they hold nothing across steps.
         """
-        snap = {"pair_dual": self.buf.pair_dual.to_numpy(), "pair_force": self.buf.pair_force.to_numpy(),
-                "step_count": np.int64(self.step_count), "iteration_count": np.int64(self.iteration_count)}
+        b = self.buf
+        snap = {"pair_dual": b.pair_dual.to_numpy(), "pair_force": b.pair_force.to_numpy(),
+                "step_count": np.int64(self.step_count), "iteration_count": np.int64(self.iteration_count),
+                "history_dt": np.float64(np.nan if self._history_dt is None else self._history_dt)}
+        if self._history_dt is not None:
+            for key in _HISTORY_FIELDS:
+                snap["history_" + key] = getattr(b, key).to_numpy()
         if self.contacts is not None:
             cs = self.contacts.colliders
             # The previous step's end transforms become the next step's begin transforms (collider velocity).
@@ -397,6 +455,17 @@ class SolverADMM(StageTimer):
             getattr(self.buf, key).from_numpy(a.astype(getattr(self.buf, key).to_numpy().dtype))
         self.step_count = int(snapshot["step_count"])
         self.iteration_count = int(snapshot["iteration_count"])
+        # The BDF2 history; a checkpoint without one (older files, backward Euler) restarts it.
+        hdt = float(snapshot.get("history_dt", np.nan))
+        self._history_dt = None
+        if np.isfinite(hdt):
+            for key in _HISTORY_FIELDS:
+                field = getattr(self.buf, key)
+                a = np.asarray(snapshot["history_" + key])
+                if a.shape[0] != n:
+                    raise ValueError(f"SolverADMM.restore: history_{key} has {a.shape[0]} rows, expected {n}")
+                field.from_numpy(a.astype(field.to_numpy().dtype))
+            self._history_dt = hdt
         if self.contacts is not None and "collider_has_begin" in snapshot:
             cs = self.contacts.colliders
             cs.has_begin = bool(snapshot["collider_has_begin"])
