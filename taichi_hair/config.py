@@ -120,14 +120,21 @@ class ContactConfig:
             (``contacts.relinearize_contacts``; the paper keeps the
             begin-of-step linearisation, which measured up to 75 % edge stretch
             on the hairball's impact) [-].
-        correction_holds_lengths: the geometric correction holds every edge at the length it had
-            before the correction: each of its sweeps projects the 8 contact batches, then the edges
-            (two colours, mass-weighted position projections), and a last edge pass ends it
-            (``projection.correction_sweep``).  The paper's correction moves only the contact
-            vertices; at the end of a step with dense, fast contact (the hairball's impact) about a
-            fifth of the hair pairs have crossed by 0.1-2 mm, and pushing them back by their contact
-            vertices alone stretched the edges beside them by up to 18 % (measured,
-            ``benchmarks/probes/contact_length.py``) [-].
+        correction_lengths: what the geometric correction does to edge lengths.
+            ``"rest"`` (default): each of its sweeps projects the 8 contact
+            batches, then every edge back to its rest length (two colours,
+            mass-weighted position projections of an inextensibility
+            constraint, Mueller et al. 2007), and edge passes end it; hair
+            stretches by ~1e-6 under its own weight (E = 3 GPa), so the rest
+            length is its length to that accuracy, and ADMM's own unconverged
+            stretch goes too.  ``"before"``: the same, holding the lengths the
+            edges had before the correction (keeps a real stretch of a soft
+            material).  ``"free"``: the paper's correction, which moves the
+            contact vertices alone.  Measured on the hairball (300 strands, 12
+            frames, ``benchmarks/probes/contact_length.py``): at the end of a
+            step of dense, fast contact 20-40 % of the hair pairs have crossed
+            by 0.1-2 mm; pushing them back by their contact vertices alone
+            stretched the edges beside them by up to 18 % [-].
         correction_max_iterations: after its ``correction_iterations`` sweeps the correction goes on, 5
             sweeps at a time, while a contact is still deeper than ``correction_tolerance``, up to this
             many sweeps in all (equal to ``correction_iterations``: the paper's fixed count) [-].
@@ -176,7 +183,7 @@ class ContactConfig:
     continuous_detections: int = 0
     mass_splitting: str = "batch"
     relinearize_correction: bool = True
-    correction_holds_lengths: bool = True
+    correction_lengths: str = "rest"
     correction_max_iterations: int = 40
     correction_tolerance: float = 0.0
     skip_when_apart: bool = True
@@ -197,6 +204,9 @@ class ContactConfig:
         if not (isinstance(self.correction_max_iterations, int) and self.correction_max_iterations >= 0):
             raise ValueError("ContactConfig.correction_max_iterations must be an integer >= 0, got "
                              f"{self.correction_max_iterations!r}")
+        if self.correction_lengths not in ("rest", "before", "free"):
+            raise ValueError("ContactConfig.correction_lengths must be 'rest', 'before' or 'free', got "
+                             f"{self.correction_lengths!r}")
         if self.mass_splitting not in ("batch", "vertex"):
             raise ValueError(f"ContactConfig.mass_splitting must be 'batch' or 'vertex', got {self.mass_splitting!r}")
         if not (math.isfinite(self.capacity_per_vertex) and self.capacity_per_vertex > 0):
@@ -228,7 +238,23 @@ class SolverADMMConfig:
             hyperelastic stretch) or ``"bergou"`` (Bergou et al. 2008:
             curvature binormal, 2 tan(phi/2); linear stretch).
         w0: scale of the elasticity constraint weights
-            W_y = w0 E_b A R^2 / (4 v^3) (Sec. 4.4) [-].
+            W_y = w0 E_b A R^2 / (4 v^3) (Sec. 4.4) [-].  Default 1; the
+            paper's value is 25 (``w0=25.0``).  Chosen by measurement
+            (BENCHMARKS.md, "Weights"): the stability atlas (dt 1/24-1/384 s x
+            2-50 iterations x 4 rods) has 18 of 36 cells stable and accurate at
+            w0 = 1 against 5 at w0 = 25; rods clamped horizontally with drag
+            8/s end 2 s within 0.1-6.5 % of L of their equilibrium at w0 = 1,
+            5-48 % at w0 = 25 (``benchmarks/probes/weight_scale.py``); the hang
+            scene with the same drag within 2e-4 L at w0 = 1, 8e-2 L at 25
+            (``benchmarks/probes/hang_settle.py``).  Too large a W_y makes each
+            iteration move x only a little towards its minimum (W_y is ~1e5
+            times the inertia m/dt^2 on 2.5 mm edges at w0 = 25), so 10
+            iterations stop far from the backward-Euler step.  The cost: with 2
+            iterations at dt = 1/384 s the long and uneven-edge rods gain energy
+            (w0 = 25 never does); weights scaled by the inertia instead diverge
+            (measured).  With contacts the end-of-step correction holds the edge
+            lengths (``ContactConfig.correction_lengths``), which the lower W_y
+            would otherwise let stretch.
         voronoi_rescaling: use v_1* = e_0 + e_1/2 and its tip mirror for the
             bending Voronoi lengths of the second and penultimate vertices
             (Sec. 5.1 "Cantilever").
@@ -271,7 +297,7 @@ class SolverADMMConfig:
     iterations: int = 10
     mode: str = "dynamic"
     strain_measure: str = "korner"
-    w0: float = 25.0
+    w0: float = 1.0
     voronoi_rescaling: bool = True
     dual_frame: str = "root"
     warm_start_duals: bool = True

@@ -334,7 +334,7 @@ class ContactPipeline:
         capacity = max(16, int(config.capacity_per_vertex * n))
         self.con = ContactFields(capacity, n)
         self.stats_out = ti.field(float, 6)
-        #: Edge lengths |x_{j+1} - x_j| before the geometric correction, which it holds [m], shape (vertex_count,).
+        #: Edge lengths the geometric correction holds (rest, or before the correction) [m], shape (vertex_count,).
         self.edge_held_length = ti.field(float, n)
         #: Sweeps of the geometric correction in the last step, and since the pipeline was made.
         self.correction_sweeps_last = 0
@@ -563,20 +563,21 @@ class ContactPipeline:
         """Geometric contact correction at the end of the step (Alg. 1, last line): project x itself.
 
         Contacts are re-linearised at x first unless ``ContactConfig.relinearize_correction`` is off
-        (x0: x^t).  With ``ContactConfig.correction_holds_lengths`` (default) each sweep also projects
-        every edge back to the length it had before the correction (``projection.correction_sweep``), and
-        a last edge pass ends it; the paper's correction moves the contact vertices alone.
+        (x0: x^t).  Unless ``ContactConfig.correction_lengths`` is ``"free"`` (the paper's correction,
+        which moves the contact vertices alone) each sweep also projects every edge back to its rest length
+        (``"rest"``, default) or to its length before the correction (``"before"``)
+        (``projection.correction_sweep``), and edge passes end it.
         """
         from .projection import (contact_statistics, correction_end, correction_sweep, hold_lengths_sweep,
                                  projection_begin, projection_sweep, store_edge_lengths)
 
         m = self.model
-        hold = self.config.correction_holds_lengths
+        hold = self.config.correction_lengths != "free"
         if self.config.relinearize_correction:
             relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con,
                                  self.config.mass_splitting == "batch")
         if hold:
-            store_edge_lengths(m, x, self.edge_held_length)
+            store_edge_lengths(m, x, self.edge_held_length, self.config.correction_lengths == "rest")
         projection_begin(x, self.con, True)
         cfg = self.config
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else self.max_radius

@@ -201,12 +201,16 @@ def hold_edge_lengths(vertex: ti.template(), edge: ti.template(), z: ti.template
 
 
 @ti.kernel
-def store_edge_lengths(edge: ti.template(), x: ti.template(), out_length: ti.template()):
-    """out_length_j = |x_{j+1} - x_j| on real edges (the lengths the correction holds) [m]."""
+def store_edge_lengths(edge: ti.template(), x: ti.template(), out_length: ti.template(), rest: ti.template()):
+    """The lengths the correction holds on real edges [m]: the rest lengths, or (``rest`` False) the
+    current |x_{j+1} - x_j|."""
     for j in x:
         length = 0.0
         if edge.edge_rest_length[j] > 0.0:
-            length = (x[j + 1] - x[j]).norm()
+            if ti.static(rest):
+                length = edge.edge_rest_length[j]
+            else:
+                length = (x[j + 1] - x[j]).norm()
         out_length[j] = length
 
 

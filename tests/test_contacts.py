@@ -404,12 +404,13 @@ def test_contact_next_to_clamped_vertices_is_not_amplified():
     assert moved < 2e-3, moved
 
 
-@pytest.mark.parametrize("hold", [True, False])
-def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(hold):
+@pytest.mark.parametrize("lengths", ["rest", "before", "free"])
+def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(lengths):
     """Rod B lies across rod A, 20 um above contact at x^t, and ends the ADMM iterations 1 mm below A's
     axis at the crossing (a pair that passed through each other).  The end-of-step correction pushes it
-    back above A.  Holding lengths (the default) it keeps every edge within 0.5 % of its length before the
-    correction (0.36 % measured: Gauss-Seidel edge passes leave a remainder); the paper's correction, moving the contact vertices alone, stretches the edges at the
+    back above A.  Holding lengths (``"rest"``, the default, or ``"before"``) it leaves every edge within
+    0.5 % of the length it holds (0.36 % measured for "before": Gauss-Seidel edge passes leave a remainder);
+    the paper's correction (``"free"``), moving the contact vertices alone, stretches the edges at the
     crossing by more than 1 % (what the hairball's impact measured)."""
     mat = RodMaterial(radius=5e-5)
     r = mat.radius
@@ -423,7 +424,7 @@ def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(hold):
     x1 = x0.copy()
     z = x1[11:, 2]
     x1[11:, 1] -= (y0 + 1e-3) * np.exp(-(z / 0.003) ** 2)   # B's middle dips 1 mm below A's axis
-    cfg = ContactConfig(friction=0.2, correction_holds_lengths=hold, velocity_margin=0.0)
+    cfg = ContactConfig(friction=0.2, correction_lengths=lengths, velocity_margin=0.0)
     con = SolverADMM(model, SolverADMMConfig(contacts=cfg)).contacts
     con.detect(st, 1 / 96, (0.0, 0.0, 0.0), False)
     assert con.contact_count >= 1
@@ -432,15 +433,18 @@ def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(hold):
     con.correct(x, st.vertex_position, cfg.correction_iterations)
     xc = x.to_numpy().astype(np.float64)
     stats = con.statistics(x)
-    real = model.host["edge_rest_length"] > 0
-    idx = np.where(real)[0]
+    rest = model.host["edge_rest_length"]
+    idx = np.where(rest > 0)[0]
     before = np.linalg.norm(x1[idx + 1] - x1[idx], axis=1)
     after = np.linalg.norm(xc[idx + 1] - xc[idx], axis=1)
-    change = np.abs(after / before - 1)
-    if hold:
+    held = rest[idx] if lengths == "rest" else before
+    change = np.abs(after / held - 1)
+    if lengths != "free":
         assert stats["crossed_pairs"] == 0
         d = min(segment_distance(xc[i], xc[i + 1], xc[j], xc[j + 1]) for i in range(10) for j in range(11, 21))
-        assert d > 2 * r - 0.2 * r, d                  # apart again, within a fifth of a radius of touching
+        # Apart again, within half a radius of touching (issue 12 asks for one radius; "rest" measured 0.3 r:
+        # B's dipped edges go back to rest length, so it has less slack to pass over A).
+        assert d > 2 * r - 0.5 * r, d
         k = int(np.argmin(np.abs(xc[11:, 2])))
         j = int(np.argmin(np.abs(xc[:11, 0] - xc[11 + k, 0])))
         assert xc[11 + k, 1] > xc[j, 1] + r            # B back on top of A (both moved: both are free)
