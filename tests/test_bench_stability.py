@@ -68,11 +68,13 @@ def test_atlas_outputs(tmp_path):
     assert cases[1].stretch_ratio == 1000.0
     cells = run_atlas(methods=("admm_w1",), dts=(1 / 96,), knobs={"admm_w1": (50,)}, cases=cases, duration=1.0)
     assert [(c.case, c.label) for c in cells][0] == ("short", "ok")
-    # The ADMM paper's Sec. 6.1 limitation: with w0 = 1, a stretch 1000x stiffer than bending diverges.
-    assert cells[1].label == "unstable" and "non-finite" in cells[1].reason
+    # The ADMM paper's Sec. 6.1 case, a stretch 1000x stiffer than bending, at w0 = 1: it diverged in single
+    # precision while the local step's dense 6x6 solve held k_s / W_y ~ 4e7; with the stretch solved by
+    # Woodbury it settles (sag within 10 % of the elastica, measured 0.2 %).
+    assert cells[1].label == "ok", (cells[1].reason, cells[1].sag_error)
     paths = write_outputs(cells, str(tmp_path))
     rows = list(csv.DictReader(open(tmp_path / "stability.csv")))
-    assert [r["label"] for r in rows] == ["ok", "unstable"]
+    assert [r["label"] for r in rows] == ["ok", "ok"]
     assert rows[0]["knob_name"] == "iterations" and rows[0]["knob"] == "50"
     assert (tmp_path / "stability_admm_w1.png").stat().st_size > 1000
     assert len(paths) == 3
