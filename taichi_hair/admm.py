@@ -159,6 +159,15 @@ def reset_duals(buf: ti.template()):
         buf.pair_force[i] = vec6(0.0)
 
 
+# --------------------------------------------------------------------------- weights
+@ti.func
+def pair_weight(vertex: ti.template(), buf: ti.template(), i: ti.i32, weight_floor: float) -> float:
+    """W_y of pair i: the w0 weight, at least ``weight_floor`` m_i (``SolverADMMConfig.inertia_floor`` / h^2
+    in the dynamic mode, 0 in the quasistatic one) [N/m].  The local and the global step call this one
+    function with the same scalar, so both see the same W_y."""
+    return ti.max(buf.pair_admm_weight[i], weight_floor * vertex.vertex_mass[i])
+
+
 # --------------------------------------------------------------------------- global step (Sec. 4.3)
 @ti.func
 def assemble_position_at(
@@ -173,6 +182,7 @@ def assemble_position_at(
     air_velocity: vec3,
     air_viscosity: float,
     dt: float,
+    weight_floor: float,
 ):
     """Row i of the position system (see :func:`assemble_position_system`).
 
@@ -199,13 +209,15 @@ def assemble_position_at(
         # Edge (i-1, i): weight from pairs i-1 and i.
         lower = 0.0
         if vertex.vertex_local_index[i] > 0:
-            we = buf.pair_admm_weight[i - 1] * pair.pair_is_active[i - 1] + buf.pair_admm_weight[i] * pair.pair_is_active[i]
+            we = (pair_weight(vertex, buf, i - 1, weight_floor) * pair.pair_is_active[i - 1]
+                  + pair_weight(vertex, buf, i, weight_floor) * pair.pair_is_active[i])
             diag += we
             if vertex.vertex_is_fixed[i - 1] == 0:
                 lower = -we
         upper = 0.0
         if edge.edge_rest_length[i] > 0.0:
-            we = buf.pair_admm_weight[i] * pair.pair_is_active[i] + buf.pair_admm_weight[i + 1] * pair.pair_is_active[i + 1]
+            we = (pair_weight(vertex, buf, i, weight_floor) * pair.pair_is_active[i]
+                  + pair_weight(vertex, buf, i + 1, weight_floor) * pair.pair_is_active[i + 1])
             diag += we
             if vertex.vertex_is_fixed[i + 1] == 0:
                 upper = -we
@@ -244,6 +256,7 @@ def assemble_position_system(
     air_velocity: vec3,
     air_viscosity: float,
     dt: float,
+    weight_floor: float,
 ):
     """Assemble M_hat dx = f_hat of Eq. (3); the same tridiagonal matrix serves the three axes.
 
@@ -257,7 +270,8 @@ def assemble_position_system(
     with x_pred, x_hat from :func:`begin_step` (``buf.vertex_*_origin``).
     """
     for i in x:
-        assemble_position_at(i, dynamic, vertex, edge, pair, x, buf, gravity, air_velocity, air_viscosity, dt)
+        assemble_position_at(i, dynamic, vertex, edge, pair, x, buf, gravity, air_velocity, air_viscosity, dt,
+                             weight_floor)
 
 
 @ti.func

@@ -16,6 +16,7 @@ is stored in the strand's body frame; it is rotated to world coordinates here.
 
 import taichi as ti
 
+from .admm import pair_weight
 from .strains import (
     ldlt_factor6,
     ldlt_substitute6,
@@ -75,6 +76,7 @@ def local_elasticity_at(
     es: ti.template(),
     buf: ti.template(),
     damping_scale: float,
+    weight_floor: float,
 ):
     """Local step of pair i (nothing on inactive pairs): see :func:`solve_local_elasticity`.
 
@@ -108,7 +110,7 @@ def local_elasticity_at(
         ksa = buf.edge_pair_stretch_stiffness[a]
         ksb = buf.edge_pair_stretch_stiffness[i]
         # Proximal term w/2 |y - (Bx - lambda)|^2 linearised at y0 = Bx.
-        w = buf.pair_admm_weight[i]
+        w = pair_weight(vertex, buf, i, weight_floor)
         Q = dual_frame(use_q, strand, body_rotation, es, s, i)
         lam = dual_to_world(buf.pair_dual[i], Q)
         for r in ti.static(range(6)):
@@ -158,6 +160,7 @@ def solve_local_elasticity(
     es: ti.template(),
     buf: ti.template(),
     damping_scale: float,
+    weight_floor: float,
 ):
     """y_i <- one Gauss-Newton step of Eq. (4) for every edge pair, then the dual update.
 
@@ -171,4 +174,4 @@ def solve_local_elasticity(
     """
     for i in x:
         local_elasticity_at(i, measure, use_q, vertex, edge, pair, strand, body_rotation, x, theta, es, buf,
-                            damping_scale)
+                            damping_scale, weight_floor)

@@ -77,6 +77,7 @@ def admm_iterations_strand(
     dt: float,
     damping_scale: float,
     iterations: ti.i32,
+    weight_floor: float,
 ):
     """``iterations`` ADMM iterations (Algorithm 1, lines 4a-4g) for every strand, strands in parallel.
 
@@ -93,12 +94,12 @@ def admm_iterations_strand(
             for k in range(m):
                 i = start + k
                 local_elasticity_at(i, measure, use_q, model, model, model, model, body_rotation, x, theta,
-                                    es, buf, damping_scale)
+                                    es, buf, damping_scale, weight_floor)
             # (d) Global step: assemble (reads pair forces i-1, i, i+1), solve, update.
             for k in range(m):
                 i = start + k
                 assemble_position_at(i, dynamic, model, model, model, x, buf, gravity, air_velocity,
-                                     air_viscosity, dt)
+                                     air_viscosity, dt, weight_floor)
             thomas_strand(start, m, buf.tri_lower, buf.tri_diag, buf.tri_upper, buf.tri_rhs3)
             for k in range(m):
                 i = start + k

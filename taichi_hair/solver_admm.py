@@ -248,6 +248,9 @@ class SolverADMM(StageTimer):
         self._history_dt = None  # until this step has completed
         h = 2.0 * dt / 3.0 if bdf2 else dt  # inertia step: M (x - x_pred) / h^2 (module docstring)
         damping_scale = 1.0 / h if dyn else 0.0
+        # W_y >= inertia_floor m / h^2 (dynamic mode): the same scalar for the local and the global step.
+        weight_floor = cfg.inertia_floor / (h * h) if dyn else 0.0
+        self._weight_floor = weight_floor
         g = ti.math.vec3(*control.gravity)
         v_air = ti.math.vec3(*control.air_velocity)
 
@@ -275,7 +278,7 @@ class SolverADMM(StageTimer):
             # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
             admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                    control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
-                                   v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations)
+                                   v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations, weight_floor)
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
         elif self.schedule == "strand":
@@ -290,7 +293,7 @@ class SolverADMM(StageTimer):
                 t0 = self._tock("projection", t0)
                 admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                        control.body_rotation, state.vertex_position, state.edge_twist, state, b,
-                                       g, v_air, cfg.air_viscosity, h, damping_scale, 1)
+                                       g, v_air, cfg.air_viscosity, h, damping_scale, 1, weight_floor)
                 t0 = self._tock("iterations", t0)
                 self.iteration_count += 1
         else:
@@ -335,7 +338,8 @@ class SolverADMM(StageTimer):
                 t0 = self._tock("continuous", t0)
             # (a) Local elasticity solve over y (Sec. 4.4).
             solve_local_elasticity(self.measure, self.use_q, m, m, m, m, control.body_rotation,
-                                   state.vertex_position, state.edge_twist, state, b, damping_scale)
+                                   state.vertex_position, state.edge_twist, state, b, damping_scale,
+                                   self._weight_floor)
             t0 = self._tock("local", t0)
             # (b) Feasible projection over z (Sec. 4.5) and lambda_z += z - x.
             if self.contacts is not None:
@@ -343,7 +347,8 @@ class SolverADMM(StageTimer):
                 t0 = self._tock("projection", t0)
             # (c) The dual update lambda_y += y - Bx is fused into the local step.
             # (d, e) Global tridiagonal solve over x (Sec. 4.3), then frames.
-            admm.assemble_position_system(dyn, m, m, m, state.vertex_position, b, g, v_air, cfg.air_viscosity, dt)
+            admm.assemble_position_system(dyn, m, m, m, state.vertex_position, b, g, v_air, cfg.air_viscosity, dt,
+                                          self._weight_floor)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
             admm.apply_position_update(m, state.vertex_position, b)
             t0 = self._tock("global", t0)
