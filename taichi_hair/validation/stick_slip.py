@@ -192,7 +192,8 @@ class StickSlipResult:
                             self.critical / self.reference - 1.0, np.nan)
 
     def median_abs_error(self, lo: float = 0.1, hi: float = 0.3) -> float:
-        """Median of |rel error| over the mu in [lo, hi] (NaN if none; a rod that never slid counts as inf)."""
+        """Median of |rel error| over the mu in [lo, hi] (NaN if none; a rod that never slid counts as
+        inf)."""
         sel = (self.mus >= lo - 1e-9) & (self.mus <= hi + 1e-9)
         if not sel.any():
             return float("nan")
