@@ -319,28 +319,5 @@ def ldlt_substitute6(L: mat6, D: vec6, b: vec6) -> vec6:
 @ti.func
 def ldlt_solve6(H: mat6, b: vec6) -> vec6:
     """Solve H x = b for symmetric positive definite H by LDL^T without pivoting (Sec. 4.4)."""
-    L = mat6(0.0)
-    D = vec6(0.0)
-    for j in ti.static(range(6)):
-        s = H[j, j]
-        for k in ti.static(range(j)):
-            s -= L[j, k] * L[j, k] * D[k]
-        D[j] = s
-        for i in ti.static(range(j + 1, 6)):
-            t = H[i, j]
-            for k in ti.static(range(j)):
-                t -= L[i, k] * L[j, k] * D[k]
-            L[i, j] = t / s
-    y = vec6(0.0)
-    for i in ti.static(range(6)):
-        s = b[i]
-        for k in ti.static(range(i)):
-            s -= L[i, k] * y[k]
-        y[i] = s
-    x = vec6(0.0)
-    for i in ti.static(range(5, -1, -1)):
-        s = y[i] / D[i]
-        for k in ti.static(range(i + 1, 6)):
-            s -= L[k, i] * x[k]
-        x[i] = s
-    return x
+    L, D = ldlt_factor6(H)
+    return ldlt_substitute6(L, D, b)
