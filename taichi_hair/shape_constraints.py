@@ -225,6 +225,12 @@ def project_out_of_collider(cs: ti.template(), c: ti.i32, p: vec3, p_begin: vec3
     SDF one step along the trilinear gradient is only first-order.  Points outside a mesh's SDF grid
     are far from it (``colliders.FAR``) and never move.
     """
+    return _project_out(cs, c, p, p_begin, radius, cs.collider_friction[c])
+
+
+@ti.func
+def _project_out(cs: ti.template(), c: ti.i32, p: vec3, p_begin: vec3, radius: float, mu: float) -> vec3:
+    """The body of :func:`project_out_of_collider` with the friction coefficient ``mu`` given (0: none)."""
     R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[c])
     q = R.transpose() @ (p - T)
     d, n = collider_distance(cs, c, q)
@@ -232,7 +238,6 @@ def project_out_of_collider(cs: ti.template(), c: ti.i32, p: vec3, p_begin: vec3
     if d < radius:
         depth = radius - d
         q = q + depth * n
-        mu = cs.collider_friction[c]
         if mu > 0.0:
             Rb, Tb = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[c])
             dq = q - Rb.transpose() @ (p_begin - Tb)
@@ -252,17 +257,7 @@ def project_out_of_collider_normal(cs: ti.template(), c: ti.i32, p: vec3, radius
     """:func:`project_out_of_collider` without friction: ``p`` moves along the collider's normal until it
     is ``radius`` away (two passes, as there).  The follow-the-leader pass uses it: friction was already
     applied once in the step's collision stage and must not act twice."""
-    R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[c])
-    q = R.transpose() @ (p - T)
-    out = p
-    d, n = collider_distance(cs, c, q)
-    if d < radius:
-        q = q + (radius - d) * n
-        d2, n2 = collider_distance(cs, c, q)
-        if d2 < radius:
-            q = q + (radius - d2) * n2
-        out = R @ q + T
-    return out
+    return _project_out(cs, c, p, p, radius, 0.0)
 
 
 @ti.func
