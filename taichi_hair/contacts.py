@@ -336,9 +336,8 @@ class ContactPipeline:
         self.stats_out = ti.field(float, 6)
         #: Edge lengths the geometric correction holds (rest, or before the correction) [m], shape (vertex_count,).
         self.edge_held_length = ti.field(float, n)
-        #: Sweeps of the geometric correction in the last step, and since the pipeline was made.
+        #: Sweeps of the geometric correction in the last step (reported in ``statistics``).
         self.correction_sweeps_last = 0
-        self.correction_sweeps_total = 0
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
         #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
         self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
@@ -602,7 +601,6 @@ class ContactPipeline:
             for _ in range(_FINAL_EDGE_PASSES):
                 hold_lengths_sweep(m, m, self.con, self.edge_held_length)
         self.correction_sweeps_last = done
-        self.correction_sweeps_total += done
         correction_end(m, x, self.con)
 
     def clear(self, buf) -> None:
@@ -642,5 +640,6 @@ class ContactPipeline:
                 "separating": int(o[2]), "max_penetration_m": max(float(o[3]), float(o[4]), 0.0),
                 "body_penetration_max_m": max(float(o[3]), 0.0), "hair_penetration_max_m": max(float(o[4]), 0.0),
                 "hair_penetration_p99_m": p99, "crossed_pairs": int(o[5]),
+                "correction_sweeps": self.correction_sweeps_last,
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
                 "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped}
