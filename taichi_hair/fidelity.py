@@ -210,11 +210,12 @@ def _stand_in(strand_count: int) -> str:
 
 def eligible_methods(hair_hair: bool, colliders: bool) -> tuple[str, ...]:
     """Methods of the Pareto data that can simulate a scene with these features."""
+    admm = ("admm", "admm_w1", "admm_bdf2", "admm_f64")
     if hair_hair:
-        return ("admm", "admm_w1", "admm_f64")
+        return admm
     if colliders:
-        return ("admm", "admm_w1", "admm_f64", "shape")
-    return ("admm", "admm_w1", "admm_f64", "shape", "xpbd")
+        return admm + ("shape",)
+    return admm + ("shape", "xpbd")
 
 
 def choose_for_scene(points, strand_count: int, vertex_count: int, fps: float, precision: str, hair_hair: bool,
@@ -247,11 +248,12 @@ def choose_for_scene(points, strand_count: int, vertex_count: int, fps: float, p
             raise ValueError(f"no measured setting fits {budget_ms:g} ms per frame for {vertex_count} vertices at "
                              f"{fps:g} fps (the cheapest measured would take about {cheapest:.3g} ms)") from None
         raise ValueError(str(exc).replace("choose: ", "")) from None
-    solver = {"admm": "admm", "admm_w1": "admm", "admm_f64": "admm"}.get(p.method, p.method)
+    from .bench.methods import ADMM_DESCRIPTIONS, is_admm
+
+    solver = "admm" if is_admm(p.method) else p.method
     substeps = max(1, int(round(1.0 / (fps * p.dt))))
     est = p.cost * per_frame
-    knobs = {"admm": f"w0 = 25, {p.iterations} iterations", "admm_w1": f"w0 = 1, {p.iterations} iterations",
-             "admm_f64": f"w0 = 1, {p.iterations} iterations, f64",
+    knobs = {**{name: f"{d}, {p.iterations} iterations" for name, d in ADMM_DESCRIPTIONS.items()},
              "shape": f"Method {p.shape_method}, {p.iterations} local/length iterations",
              "xpbd": f"{p.substeps} substeps"}[p.method]
     desc = (f"method chosen from the measured speed/accuracy data: {p.method} ({knobs}), dt = 1/{1 / p.dt:.0f} s "
@@ -265,17 +267,17 @@ def choose_for_scene(points, strand_count: int, vertex_count: int, fps: float, p
 
 def solver_config_for(choice: MethodChoice, admm_config=None):
     """The solver configuration of a choice; an ADMM choice keeps ``admm_config``'s other settings
-    (contacts, mode, drag) and changes only the iterations and w0."""
+    (contacts, mode, drag) and changes only the iterations, w0 and the integrator."""
     from dataclasses import replace
 
-    from .bench.pareto import ADMM_W0
+    from .bench.methods import ADMM_VARIANTS
 
     p = choice.point
     if choice.solver == "admm":
         from .config import SolverADMMConfig
 
         base = admm_config if admm_config is not None else SolverADMMConfig()
-        return replace(base, iterations=int(p.iterations), w0=ADMM_W0[p.method])
+        return replace(base, iterations=int(p.iterations), **ADMM_VARIANTS[p.method])
     if choice.solver == "shape":
         from .solver_shape import ShapeRegion, SolverShapeConfig
 

@@ -87,10 +87,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..validation.elasticity_params import GRAVITY, HAIR
+from .methods import ADMM_VARIANTS, admm_config, is_admm
 
 SCENES = ("cantilever", "swing", "groom")
-#: Constraint weight scale w0 of each ADMM variant.
-ADMM_W0 = {"admm": 25.0, "admm_ref": 25.0, "admm_w1": 1.0, "admm_f64": 1.0}
+#: Constraint weight scale w0 of each ADMM variant (the variants: :mod:`taichi_hair.bench.methods`).
+ADMM_W0 = {name: v["w0"] for name, v in ADMM_VARIANTS.items()}
 #: The reference: two f64 ADMM runs (coarse, fine) [s] and their iterations per step.
 REFERENCE_DTS = (1 / 1920, 1 / 3840)
 REFERENCE_ITERATIONS = 50
@@ -164,7 +165,7 @@ def shake_rotation(t: float) -> np.ndarray:
 # --------------------------------------------------------------------------- method runs
 @dataclass
 class RunSpec:
-    """One point: ``method`` (admm, admm_w1, admm_f64, admm_ref, shape, xpbd), dt [s] and its knobs."""
+    """One point: ``method`` (admm, admm_w1, admm_bdf2, admm_f64, admm_ref, shape, xpbd), dt [s] and its knobs."""
 
     method: str
     dt: float
@@ -174,8 +175,7 @@ class RunSpec:
 
     @property
     def family(self) -> str:
-        return {"admm": "admm", "admm_w1": "admm", "admm_f64": "admm", "admm_ref": "admm"}.get(self.method,
-                                                                                             self.method)
+        return "admm" if is_admm(self.method) else self.method
 
     @property
     def label(self) -> str:
@@ -190,7 +190,7 @@ def default_specs(full: bool = False) -> list[RunSpec]:
     """The f32 sweep (admm_f64 and the reference run in the f64 worker)."""
     specs = []
     its = (2, 5, 10, 30, 100) if full else (5, 10, 30)
-    for m in ("admm", "admm_w1"):
+    for m in ("admm", "admm_w1", "admm_bdf2"):
         for dt in ((1 / 48, 1 / 96, 1 / 384) if full else (1 / 96, 1 / 384)):
             specs += [RunSpec(m, dt, iterations=i) for i in its]
     for sm in (1, 2, 3):
@@ -210,12 +210,10 @@ def f64_specs(full: bool = False) -> list[RunSpec]:
 def _make_solver(spec: RunSpec, model, scene: Scene):
     rho_a = HAIR["density"] * math.pi * HAIR["radius"] ** 2
     if spec.family == "admm":
-        from ..config import SolverADMMConfig
         from ..solver_admm import SolverADMM
 
-        w0 = ADMM_W0[spec.method]
-        return SolverADMM(model, SolverADMMConfig(iterations=spec.iterations, w0=w0,
-                                                  air_viscosity=scene.drag_rate * rho_a, check_finite=False))
+        return SolverADMM(model, admm_config(spec.method, iterations=spec.iterations,
+                                             air_viscosity=scene.drag_rate * rho_a, check_finite=False))
     if spec.method == "shape":
         from ..solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
 
@@ -246,7 +244,7 @@ def _configure(solver, spec: RunSpec, scene: Scene) -> None:
 
 
 def _solver_key(spec: RunSpec):
-    return ("admm", ADMM_W0[spec.method]) if spec.family == "admm" else (spec.method, 0.0)
+    return ("admm", tuple(sorted(ADMM_VARIANTS[spec.method].items()))) if spec.family == "admm" else (spec.method, 0.0)
 
 
 def run_specs(scene_name: str, specs, groom_strands: int = 192, progress=None):
@@ -484,7 +482,7 @@ def choose(points, scene: str, max_error: float | None = None, max_cost: float |
     return min(ok, key=lambda p: (p.error, p.cost))
 
 
-COLORS = {"admm": "C3", "admm_w1": "C1", "admm_f64": "C5", "shape": "C0", "xpbd": "C2"}
+COLORS = {"admm": "C3", "admm_w1": "C1", "admm_bdf2": "C4", "admm_f64": "C5", "shape": "C0", "xpbd": "C2"}
 
 
 def plot(points, infos: dict, path: str) -> None:

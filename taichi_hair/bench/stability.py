@@ -83,12 +83,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..validation.elasticity_params import GRAVITY, HAIR
+from .methods import admm_config, is_admm
 
 LABELS = ("unstable", "wrong", "ok")
-METHODS = ("admm", "admm_w1", "shape", "xpbd")
-KNOB_NAMES = {"admm": "iterations", "admm_w1": "iterations", "shape": "iterations", "xpbd": "substeps"}
-#: ADMM constraint weight scale w0 of each ADMM variant (SolverADMMConfig.w0).
-ADMM_W0 = {"admm": 25.0, "admm_w1": 1.0}
+METHODS = ("admm", "admm_w1", "admm_bdf2", "shape", "xpbd")
+KNOB_NAMES = {"admm": "iterations", "admm_w1": "iterations", "admm_bdf2": "iterations", "shape": "iterations",
+              "xpbd": "substeps"}
 
 
 @dataclass
@@ -250,12 +250,11 @@ class StrandMonitor:
 def make_solver(method: str, model, drag_rate: float, knob: int, dt: float):
     """A solver of ``method`` with the atlas's damping; its knob set by :func:`set_knob`."""
     rho_a = HAIR["density"] * math.pi * HAIR["radius"] ** 2
-    if method in ADMM_W0:
-        from ..config import SolverADMMConfig
+    if is_admm(method):
         from ..solver_admm import SolverADMM
 
-        return SolverADMM(model, SolverADMMConfig(iterations=knob, w0=ADMM_W0[method],
-                                                  air_viscosity=drag_rate * rho_a, check_finite=False))
+        return SolverADMM(model, admm_config(method, iterations=knob, air_viscosity=drag_rate * rho_a,
+                                             check_finite=False))
     if method == "shape":
         from ..solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
 
@@ -272,7 +271,7 @@ def make_solver(method: str, model, drag_rate: float, knob: int, dt: float):
 
 def set_knob(method: str, solver, knob: int, dt: float, drag_rate: float) -> None:
     """Change a solver's knob (and its per-step damping for dt) between runs, without recompiling."""
-    if method in ADMM_W0:
+    if is_admm(method):
         solver.config.iterations = int(knob)
         solver.reset_duals()
     elif method == "shape":
