@@ -5,7 +5,7 @@
    and the largest position difference after the run.
 2. Hair-hair search skipped: ms per step with contacts on, hanging strands 5 cm apart on a head
    swaying side to side (nothing within reach), ``skip_when_apart`` on and off.
-3. Equilibrium only: wall time of ``fidelity.equilibrium`` (quasistatic, w0 = 1) against a damped
+3. Equilibrium only: wall time of ``equilibrium.equilibrium`` (quasistatic, w0 = 1) against a damped
    dynamic run to rest (3 s simulated) for the same cantilevers, and their distance.
 
 Usage:
@@ -112,7 +112,7 @@ def main() -> None:
           f"{a.steps // 2} steps) vs {sk[False][0]:.2f} searched; identical: {res['hair_search']['identical']}")
 
     # 3. Equilibrium.
-    from taichi_hair.fidelity import equilibrium
+    from taichi_hair.equilibrium import equilibrium
 
     n = max(4, a.strands // 10)
     model = straight_groom(th, n, 21, gap=0.01, direction=(1.0, 0.0, 0.0), length=0.1)

@@ -20,7 +20,7 @@ solver only) are written every ``--checkpoint-every`` frames and at the end; ``-
 the last one and gives the same frames, bit for bit, as a run that never stopped (and refuses a
 checkpoint made for another scene or other settings).
 
-Model no more than the scene needs (:mod:`taichi_hair.fidelity`): the run prints, and writes into the
+Model no more than the scene needs (README, "Model no more than a scene needs"): the run prints, and writes into the
 summary under ``model``, what the solver chose to model and to skip.  ``--equilibrium`` asks for the rest
 shape only: quasistatic steps (ADMM) until the largest displacement per step is below
 ``--equilibrium-tolerance``, written as frame 1.  ``--max-error E`` (a fraction of the strand length) or
@@ -319,7 +319,7 @@ def cmd_simulate(args) -> int:
         t0 = time.perf_counter()
         try:
             if args.equilibrium:
-                from .fidelity import equilibrium
+                from .equilibrium import equilibrium
 
                 eq = equilibrium(solver, state, control, args.equilibrium_tolerance, args.max_steps, dt,
                                  callback=lambda k, d: bar.update(0, step=k, displacement=f"{d:.2e}"))
@@ -548,7 +548,7 @@ def _check_model_options(args, scene) -> None:
             raise CLIError(f"--max-steps must be >= 1, got {args.max_steps}")
         from dataclasses import replace
 
-        # w0 = 1: the paper's 25 converges far more slowly in the quasistatic mode (fidelity.py).
+        # w0 = 1: the paper's 25 converges far more slowly in the quasistatic mode (equilibrium.py).
         scene.solver_config = replace(scene.solver_config, mode="quasistatic", w0=1.0)
         scene.frames = 1
         scene.description = dict(scene.description, equilibrium=args.equilibrium_tolerance)
@@ -560,7 +560,7 @@ def _apply_method_choice(args, scene, model):
     if args.max_error is None and args.budget_ms is None:
         return None
     from .bench.pareto import load_shipped, read_csv
-    from .fidelity import choose_for_scene, solver_config_for
+    from .bench.choice import choose_for_scene, solver_config_for
 
     try:
         points = read_csv(args.pareto_data) if args.pareto_data else load_shipped()

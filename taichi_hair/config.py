@@ -156,12 +156,12 @@ class ContactConfig:
             proximity detection only [-].
         skip_when_apart: skip the hair-hair candidate search of a step in
             which no two strands come within reach and no strand can touch
-            itself (exact: :mod:`taichi_hair.fidelity`); the statistics
+            itself (exact: ``grid.strands_apart``); the statistics
             count the skipped steps [-].
         skip_slow_continuous: skip a continuous-detection pass when twice
             the largest displacement since the beginning of the step is
             within ``margin`` (pairs out of proximity reach cannot have met;
-            :mod:`taichi_hair.fidelity`) [-].
+            the README, "Model no more than a scene needs") [-].
 
     Collision weights follow the paper: W_z = m / dt~^2 with
     dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)).  For short edges of
@@ -299,7 +299,7 @@ class SolverADMMConfig:
         twist: ``"auto"`` drops the twist unknowns (steps 4f-g of
             Algorithm 1) when every strand is naturally straight, of round
             section and free to untwist, where the twist-free frame is their
-            exact value (:mod:`taichi_hair.fidelity`; the solver's
+            exact value (``frames.twist_choice``; the solver's
             ``model_choices`` says which it did and why); ``"solve"`` always
             solves them, as the paper does.
     """

@@ -421,7 +421,7 @@ class ContactPipeline:
         if cfg.hair_hair:
             proximity_boxes(m, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
             if cfg.skip_when_apart and self._strands_apart(x, margin, sweep, fall):
-                # No two strands within reach and none can touch itself: nothing to search (fidelity.py).
+                # No two strands within reach and none can touch itself: nothing to search (grid.strands_apart).
                 g.edge_candidate_count.fill(0)
                 self.hair_search_skipped = True
                 self.hair_search_skip_count += 1
@@ -494,8 +494,8 @@ class ContactPipeline:
         return added
 
     def _strands_apart(self, x, margin: float, sweep: float, fall: float) -> bool:
-        """Strand-level broad phase on the edge boxes just computed (``fidelity.strands_apart``)."""
-        from .fidelity import strands_apart
+        """Strand-level broad phase on the edge boxes just computed (``grid.strands_apart``)."""
+        from .grid import strands_apart
         from .grid import strand_boxes
 
         sb = self.strand_boxes

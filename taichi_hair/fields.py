@@ -281,7 +281,7 @@ class BoxGridFields:
 
 
 class StrandBoxFields:
-    """Strand-level broad phase (``fidelity.strands_apart``): per-strand boxes, shape (strand_count,)."""
+    """Strand-level broad phase (``grid.strands_apart``): per-strand boxes, shape (strand_count,)."""
 
     def __init__(self, strand_count: int):
         s = max(1, strand_count)

@@ -23,6 +23,7 @@ level of cells of the longest edge, with each edge entered in all the cells
 its box overlaps, so a query visits ~1-8 cells and no neighbourhood.
 """
 
+import numpy as np
 import taichi as ti
 
 from .fields import vec9
@@ -183,7 +184,7 @@ def strand_boxes(strand: ti.template(), edge: ti.template(), x: ti.template(), r
                  grid: ti.template(), boxes: ti.template(), out: ti.template(), margin: float, sweep: float,
                  fall: float):
     """Per strand: the union of its edges' detection boxes (``proximity_boxes`` first), and whether the
-    strand can touch itself (``fidelity.strands_apart``).
+    strand can touch itself (``grid.strands_apart``).
 
     It cannot when every edge tangent t_k makes an acute angle with the chord direction d
     (c = min_k t_k . d > 0): along d the strand then advances monotonically, so two non-adjacent edges
@@ -378,3 +379,54 @@ def _insert_candidate(grid: ti.template(), a: ti.i32, b: ti.i32, dist: float, co
             grid.edge_candidate_distance[a, pos] = dist
             new_count = ti.min(count + 1, K)
     return new_count
+
+
+# --------------------------------------------------------------------------- strand-level broad phase (host)
+# * **Hair-hair detection skipped** (``ContactConfig.skip_when_apart``, default on) in a step where
+# no two strands come within reach (strand boxes: the union of the edges' detection boxes, which
+# include the velocity reach) and no strand can touch itself (every edge makes an acute angle with
+# the root-to-tip chord, and the shortest edge times the cosine of the largest such angle exceeds the
+# reach of two of the strand's edges: ``grid.strand_boxes``).
+# Exact: the full search would find no pair either (bit-identical results, tested).
+
+def strands_apart(box_lo: np.ndarray, box_hi: np.ndarray, self_clear: np.ndarray,
+                  max_pairs: int = 2_000_000) -> bool:
+    """True when no two strand boxes overlap and no strand can touch itself.
+
+    Sweep and prune along the axis on which the box centres spread most (sorted box starts), then the
+    overlap on the other two axes of the remaining pairs.  When the sweep leaves more than ``max_pairs``
+    pairs the strands are taken to be within reach without testing further (a dense groom: the full
+    search runs anyway).
+
+    Args:
+        box_lo, box_hi: strand boxes [m], shape (strand_count, 3); a strand with no real edge has
+            lo = +inf, hi = -inf.
+        self_clear: 1 where the strand cannot touch itself, shape (strand_count,).
+    """
+    if not np.all(self_clear):
+        return False
+    lo = np.asarray(box_lo, np.float64)
+    hi = np.asarray(box_hi, np.float64)
+    s = lo.shape[0]
+    if s < 2:
+        return True
+    real = lo[:, 0] <= hi[:, 0]
+    if real.sum() < 2:
+        return True
+    centre = 0.5 * (lo[real] + hi[real])
+    axis = int(np.argmax(centre.max(axis=0) - centre.min(axis=0)))
+    others = [k for k in range(3) if k != axis]
+    order = np.argsort(lo[:, axis], kind="stable")
+    lo, hi = lo[order], hi[order]
+    end = np.searchsorted(lo[:, axis], hi[:, axis], side="right")
+    counts = np.maximum(end - np.arange(s) - 1, 0)
+    total = int(counts.sum())
+    if total == 0:
+        return True
+    if total > max_pairs:
+        return False
+    a = np.repeat(np.arange(s), counts)
+    start = np.repeat(np.cumsum(counts) - counts, counts)
+    b = a + 1 + (np.arange(total) - start)
+    overlap = np.all((lo[a][:, others] <= hi[b][:, others]) & (lo[b][:, others] <= hi[a][:, others]), axis=1)
+    return not bool(overlap.any())

@@ -25,7 +25,7 @@ for its strand, *all* iterations serially:
         Thomas solve          (thomas_strand,           1 right-hand side)
         theta += dtheta       (material_frame_at,       every edge)
 
-or, when the twist unknowns are dropped (``twist_free``, :mod:`taichi_hair.fidelity`),
+or, when the twist unknowns are dropped (``twist_free``, ``frames.twist_choice``),
 the last four replaced by the twist-free frames (``twist_free_strand``).
 
 A strand's working set (a few kB for tens of vertices) stays in L1/L2 cache

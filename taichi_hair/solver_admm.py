@@ -15,7 +15,7 @@ Per step (Sec. 4.2):
    f. twist Newton step d2E/dth2 dth = -dE/dth -- ``admm.compute_pair_twist_terms`` + ``assemble_twist_system``
    g. theta <- theta + dth, update frames
       (f-g replaced by the exact twist-free frames ``frames.update_twist_free_frames`` when
-      every rod is naturally straight and round: ``fidelity.twist_choice``)
+      every rod is naturally straight and round: ``frames.twist_choice``)
 5. optional geometric contact correction     -- ``ContactPipeline.correct`` (projection on x itself)
 6. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
 
@@ -194,11 +194,11 @@ class SolverADMM(StageTimer):
         rest = self._rest_state
         admm.compute_strains(self.measure, m, m, rest.vertex_position, rest.edge_twist, rest,
                              self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
-        # Model no more than the scene needs (fidelity.py): the twist unknowns of straight round rods.
+        # Model no more than the scene needs (frames.twist_choice): the twist unknowns of straight round rods.
         if cfg.twist == "solve":
             self.twist_free, why = False, "twist solved (SolverADMMConfig.twist='solve')"
         else:
-            from .fidelity import twist_choice
+            from .frames import twist_choice
 
             self.twist_free, why = twist_choice(h, self.buf.pair_rest_kappa.to_numpy())
         self.model_choices["twist"] = why
@@ -356,7 +356,7 @@ class SolverADMM(StageTimer):
                                     state.edge_twist, state)
             t0 = self._tock("frames", t0)
             if self.twist_free:
-                # (f, g) replaced by the twist of a naturally straight round rod: none (fidelity.py).
+                # (f, g) replaced by the twist of a naturally straight round rod: none (frames.twist_choice).
                 update_twist_free_frames(m, m, state.edge_twist, state, False)
             else:
                 # (f, g) Twist Newton step, then material frames.
@@ -379,7 +379,7 @@ class SolverADMM(StageTimer):
             update_twist_free_frames(m, m, state.edge_twist, state, False)
 
     def model_report(self) -> dict:
-        """What the solver modelled and skipped so far, in words, by topic (:mod:`taichi_hair.fidelity`)."""
+        """What the solver modelled and skipped so far, in words, by topic (README, "Model no more than a scene needs")."""
         rep = dict(self.model_choices)
         rep["mode"] = ("quasistatic: inertia and damping dropped" if not self.dynamic
                        else "dynamic (BDF2, backward Euler on steps without history)"

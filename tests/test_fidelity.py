@@ -93,7 +93,7 @@ def test_twist_free_frames_have_no_twist_and_both_schedules_agree():
 def test_twist_is_kept_where_it_matters():
     """Curly rods, elliptic sections and a held tip keep the twist unknowns, and the reason names a strand."""
     from taichi_hair.config import SolverADMMConfig
-    from taichi_hair.fidelity import twist_choice
+    from taichi_hair.frames import twist_choice
     from taichi_hair.solver_admm import SolverADMM
 
     curly = SolverADMM(_straight(n=2, curl=2e-3), SolverADMMConfig())
@@ -113,7 +113,7 @@ def test_twist_is_kept_where_it_matters():
 
 # --------------------------------------------------------------------------- contacts
 def test_strands_apart_broad_phase():
-    from taichi_hair.fidelity import strands_apart
+    from taichi_hair.grid import strands_apart
 
     lo = np.array([[0, 0, 0], [2, 0, 0], [4, 0, 0]], float)
     hi = lo + 1.0
@@ -210,7 +210,7 @@ def test_equilibrium_matches_a_long_damped_dynamic_run():
     """Four 10 cm horizontal cantilevers: the quasistatic equilibrium (estimated 1 um tolerance) and a 3 s
     dynamic run with strong air drag come to rest within 10 um of each other (measured 1.2 um)."""
     from taichi_hair.config import SolverADMMConfig
-    from taichi_hair.fidelity import equilibrium
+    from taichi_hair.equilibrium import equilibrium
     from taichi_hair.solver_admm import SolverADMM
 
     model = _straight(n=4, m=21, length=0.1, gap=0.01, direction=(1.0, 0.0, 0.0))
@@ -230,7 +230,7 @@ def test_equilibrium_matches_a_long_damped_dynamic_run():
 
 def test_equilibrium_refuses_a_dynamic_solver_and_reports_non_convergence():
     from taichi_hair.config import SolverADMMConfig
-    from taichi_hair.fidelity import equilibrium
+    from taichi_hair.equilibrium import equilibrium
     from taichi_hair.solver_admm import SolverADMM
 
     model = _straight(n=2, direction=(1.0, 0.0, 0.0))
@@ -257,7 +257,7 @@ def _points():
 
 
 def test_choice_respects_what_the_scene_needs():
-    from taichi_hair.fidelity import choose_for_scene, solver_config_for
+    from taichi_hair.bench.choice import choose_for_scene, solver_config_for
 
     pts = _points()
     c = choose_for_scene(pts, 100, 2000, 24.0, "f32", hair_hair=False, colliders=False, max_error=0.1)
