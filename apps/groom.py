@@ -1,7 +1,7 @@
 """The grooming window (Daviet 2023, Sec. 5.3): ``taichi-hair groom [GROOM]`` or ``python apps/groom.py [GROOM]``.
 
 A GGUI window draws the head mesh and the strands (lines coloured by region, strand, selection or the
-skinning interpolation error) while a quasistatic :class:`~taichi_hair.grooming.GroomingSession` runs a
+skinning interpolation error) while a quasistatic :class:`~taichi_hair.groom.session.GroomingSession` runs a
 few ADMM iterations per displayed frame with proximity contacts only.  Everything the window does goes
 through :class:`GroomApp`, whose methods take pixel coordinates and keys, so the tools are testable off
 screen (``tests/test_groom_app.py``) and every edit lands in the session log (``Save session`` writes it;
@@ -256,7 +256,7 @@ class GroomApp:
 
     def open(self, path) -> bool:
         """Load another groom; on failure keep the current one and show the loader's message."""
-        from taichi_hair.grooming import GroomingSession
+        from taichi_hair.groom.session import GroomingSession
 
         try:
             new = self.make_session(path) if self.make_session else GroomingSession.open(path)
@@ -304,7 +304,7 @@ class GroomApp:
 def _interpolation_error(session) -> np.ndarray:
     """Per-strand distance between each strand and its skinned reconstruction from the session's guides
     (0 on guides; see ``groom_cli.skinning_error``) [m]."""
-    from taichi_hair.groom_cli import skinning_error
+    from taichi_hair.cli.groom import skinning_error
 
     c = session.config
     return skinning_error(session.groom, c.guide_ratio, c.neighbour_count, c.seed)
@@ -348,16 +348,16 @@ def _panel(app, window):
 
 
 def run_window(args) -> int:
-    """The window of ``taichi-hair groom [GROOM]`` (arguments of ``taichi_hair.groom_cli``)."""
+    """The window of ``taichi-hair groom [GROOM]`` (arguments of ``taichi_hair.cli.groom``)."""
     import taichi as ti
 
-    from taichi_hair.cli_common import _init_taichi
-    from taichi_hair.groom_cli import head_colliders, load_groom_arg, load_head_mesh, session_config
-    from taichi_hair.grooming import GroomingSession
+    from taichi_hair.cli.common import _init_taichi
+    from taichi_hair.cli.groom import head_colliders, load_groom_arg, load_head_mesh, session_config
+    from taichi_hair.groom.session import GroomingSession
     from taichi_hair.io import load_groom
     from taichi_hair.render import ViewerGGUI
 
-    from taichi_hair.cli_common import CLIError
+    from taichi_hair.cli.common import CLIError
 
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise CLIError("no display for the window (DISPLAY is not set); replay a session off screen with "
@@ -423,7 +423,7 @@ def run_window(args) -> int:
 
 
 def main(argv=None) -> int:
-    from taichi_hair.groom_cli import register
+    from taichi_hair.cli.groom import register
 
     p = argparse.ArgumentParser(prog="apps/groom.py")
     sub = p.add_subparsers(dest="command")

@@ -27,7 +27,7 @@ def main(argv=None):
 
     ti.init(arch=getattr(ti, args.arch), log_level=ti.WARN)
     import taichi_hair as th
-    from taichi_hair.scenes import HangScene, build_hang, nod_rotation
+    from taichi_hair.scene.builtin import HangScene, build_hang, nod_rotation
 
     scene = HangScene(strands=args.strands)
     model = build_hang(scene)

@@ -22,7 +22,7 @@ in the scalp when its centroid lies above the hairline height
 
 (0.125 m at the forehead, 0.0725 m above the ears, 0.02 m at the nape) and
 within ``SCALP_SHELL`` of the cranium ellipsoid (which keeps ears, face and
-neck out).  ``taichi_hair.generators.load_head`` reads the groups in file
+neck out).  ``taichi_hair.groom.generators.load_head`` reads the groups in file
 order; trimesh (``MeshCollider``) loads the same file as one watertight mesh.
 """
 

@@ -112,7 +112,7 @@ def main() -> None:
           f"{a.steps // 2} steps) vs {sk[False][0]:.2f} searched; identical: {res['hair_search']['identical']}")
 
     # 3. Equilibrium.
-    from taichi_hair.equilibrium import equilibrium
+    from taichi_hair.solvers.equilibrium import equilibrium
 
     n = max(4, a.strands // 10)
     model = straight_groom(th, n, 21, gap=0.01, direction=(1.0, 0.0, 0.0), length=0.1)

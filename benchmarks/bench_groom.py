@@ -1,6 +1,6 @@
 """Benchmark of the grooming edit loop (Daviet 2023, Sec. 5.3: 86,000 render strands, 8,600 simulated guides).
 
-A procedural groom (``taichi_hair.generators``, wavy, on ``assets/head.obj``): ``--strands`` render strands
+A procedural groom (``taichi_hair.groom.generators``, wavy, on ``assets/head.obj``): ``--strands`` render strands
 of ``--vertices`` vertices (default 86,000 x 14: 1.2M render vertices; 10 % guides = 8,600 x 14 = 120k
 simulated vertices).  A :class:`GroomingSession` runs it quasistatically with ``--iterations`` ADMM
 iterations per frame (10, as the paper) and hair-hair proximity contacts (``--contacts on``; the head is
@@ -57,8 +57,8 @@ def main(argv=None):
 
     ti.init(arch=getattr(ti, args.arch), default_fp=ti.f32, log_level=ti.WARN)
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
-    from taichi_hair.generators import HEAD_MESH_PATH, GeneratorConfig, generate_groom, load_head, read_obj_groups
-    from taichi_hair.grooming import GroomingConfig, GroomingSession
+    from taichi_hair.groom.generators import HEAD_MESH_PATH, GeneratorConfig, generate_groom, load_head, read_obj_groups
+    from taichi_hair.groom.session import GroomingConfig, GroomingSession
     from taichi_hair.render import CameraConfig, ViewerGGUI, strand_colors
 
     res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,

@@ -48,7 +48,7 @@ DT = 1.0 / 60.0
 
 def groom(th, strands, vertices):
     """The hang scene with exactly ``vertices`` per strand (lengths vary by up to 15 %)."""
-    from taichi_hair.scenes import HangScene, build_hang
+    from taichi_hair.scene.builtin import HangScene, build_hang
 
     wavy = vertices > 32
     length = 0.25 if not wavy else 0.32
@@ -63,9 +63,9 @@ SCHEMES = {"defaults": {},
 
 
 def bench_size(th, ti, strands, vertices, methods, steps, scheme="defaults"):
-    from taichi_hair.scenes import nod_rotation
-    from taichi_hair.colliders import SphereCollider
-    from taichi_hair.solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
+    from taichi_hair.scene.builtin import nod_rotation
+    from taichi_hair.contact.colliders import SphereCollider
+    from taichi_hair.solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
 
     scene, model = groom(th, strands, vertices)
     length_its, local_its = TABLE2_ITERATIONS.get(vertices, (3, 4))

@@ -68,7 +68,7 @@ def main(argv=None):
     import taichi as ti
 
     ti.init(arch=getattr(ti, args.arch), default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
-    from taichi_hair.skinning import SkinningConfig, SkinningLBS, build_guides
+    from taichi_hair.groom.skinning import SkinningConfig, SkinningLBS, build_guides
 
     result = {"arch": args.arch, "machine": platform.node(), "cpu_count": os.cpu_count(),
               "strands": args.strands, "vertices_per_strand": args.vertices, "guide_ratio": args.guide_ratio,

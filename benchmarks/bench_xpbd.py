@@ -37,7 +37,7 @@ DT = 1.0 / 60.0
 
 
 def groom(strands, vertices):
-    from taichi_hair.scenes import HangScene, build_hang
+    from taichi_hair.scene.builtin import HangScene, build_hang
 
     length = 0.2
     scene = HangScene(strands=strands, length=length, edge_length=length / (vertices - 1))
@@ -45,8 +45,8 @@ def groom(strands, vertices):
 
 
 def bench(ti, strands, vertices, settings, steps, schedules):
-    from taichi_hair.scenes import nod_rotation
-    from taichi_hair.solver_xpbd import SolverXPBD, SolverXPBDConfig
+    from taichi_hair.scene.builtin import nod_rotation
+    from taichi_hair.solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
 
     scene, model = groom(strands, vertices)
     state, control = model.state(), model.control()

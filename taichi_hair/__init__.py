@@ -27,11 +27,11 @@ from .model import Model
 from .state import State, Control
 from .solver_admm import SolverADMM
 from .errors import SimulationDivergedError
-from .colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
-from .solver_xpbd import SolverXPBD, SolverXPBDConfig
-from .grooming import GroomingConfig, GroomingSession
-from .solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
-from .skinning import SkinningConfig, SkinningLBS, build_guides, compute_binding, error_colors, \
+from .contact.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
+from .solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
+from .groom.session import GroomingConfig, GroomingSession
+from .solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
+from .groom.skinning import SkinningConfig, SkinningLBS, build_guides, compute_binding, error_colors, \
     interpolation_error, select_guides
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""ADMM stage kernels of Algorithm 1 (Daviet 2023); the contact stages live in contacts.py and projection.py.
+"""ADMM stage kernels of Algorithm 1 (Daviet 2023); the contact stages live in contact/pipeline.py and contact/projection.py.
 
 Each kernel is one stage; ``solver_admm.SolverADMM.step`` sequences them
 (the "stage" schedule).  The per-index body of each stage is a ``ti.func``

@@ -1,5 +1,5 @@
 """How good a simulated frame is, measured on the host (NumPy and the exact mesh queries of
-:mod:`taichi_hair.mesh_query`): edge strain, penetration into bodies, hair-hair figures, rest.
+:mod:`taichi_hair.contact.mesh_query`): edge strain, penetration into bodies, hair-hair figures, rest.
 
     q = frame_quality(x, v, model.host, colliders, body_rotation, body_translation, solver.contact_stats)
     q["strain_p99"], q["body_penetration_max_m"], q["vertices_inside"], q["worst_strand"]
@@ -73,7 +73,7 @@ def strain_statistics(positions, edge_rest_length, vertex_strand) -> dict:
 # --------------------------------------------------------------------------- bodies
 def _analytic_signed_distance(c, p) -> np.ndarray:
     """Signed distance [m] of body-frame points p (N, 3) to a plane, sphere or capsule collider."""
-    from .colliders import CapsuleCollider, PlaneCollider, SphereCollider
+    from .contact.colliders import CapsuleCollider, PlaneCollider, SphereCollider
 
     if isinstance(c, PlaneCollider):
         return (p - c.point) @ c.normal
@@ -87,7 +87,7 @@ def _analytic_signed_distance(c, p) -> np.ndarray:
 
 
 def mesh_penetration_depth(collider, points_body) -> np.ndarray:
-    """Depth [m] of body-frame points (N, 3) inside a :class:`~taichi_hair.colliders.MeshCollider`'s true
+    """Depth [m] of body-frame points (N, 3) inside a :class:`~taichi_hair.contact.colliders.MeshCollider`'s true
     surface, 0 where outside (see the module docstring for the two stages)."""
     p = np.asarray(points_body, np.float64).reshape(-1, 3)
     depth = np.zeros(len(p))
@@ -109,11 +109,11 @@ def body_penetration(positions, colliders, body_rotation, body_translation, vert
     """Deepest penetration of each vertex into any collider, (V,) [m] (0: outside all, and at fixed vertices).
 
     Args:
-        positions: (V, 3) world [m].  colliders: those of :mod:`taichi_hair.colliders`.
+        positions: (V, 3) world [m].  colliders: those of :mod:`taichi_hair.contact.colliders`.
         body_rotation: (B, 3, 3) [-] and body_translation: (B, 3) [m], the transforms the frame ended with.
         vertex_strand: (V,) [-] (for collider strand ranges).  free: (V,) bool, vertices the solver moves.
     """
-    from .colliders import MeshCollider
+    from .contact.colliders import MeshCollider
 
     x = np.asarray(positions, np.float64)
     out = np.zeros(len(x))

@@ -9,7 +9,7 @@
   around the groom's centre, or ``Groom.region`` when the file has it),
   ``"strand"`` (a fixed random colour per strand), ``"groom"`` (the file's
   ``color``), ``"error"`` (per-vertex values through
-  :func:`taichi_hair.skinning.error_colors`) and a selection highlight.
+  :func:`taichi_hair.groom.skinning.error_colors`) and a selection highlight.
 * :class:`ViewerGGUI`: the strands as GGUI lines (one segment per edge, by an
   index field), optional points (selection, pins) and a head mesh, all in
   fields allocated once per layout; :meth:`ViewerGGUI.render` draws a frame,
@@ -180,7 +180,7 @@ def strand_colors(groom, mode: str = "region", values=None, selection=None, vmax
             centre as a hue, so neighbouring strands share a colour), ``"strand"`` (a random colour per
             strand, seeded by its index), ``"groom"`` (the file's ``color``; region colours when it has
             none), ``"error"`` (``values`` per vertex or per strand [m] on the ramp of
-            :func:`taichi_hair.skinning.error_colors`, up to ``vmax``), ``"uniform"`` (hair brown).
+            :func:`taichi_hair.groom.skinning.error_colors`, up to ``vmax``), ``"uniform"`` (hair brown).
         selection: optional bool per vertex: selected vertices are drawn in bright orange.
     """
     if mode not in COLOR_MODES:
@@ -198,7 +198,7 @@ def strand_colors(groom, mode: str = "region", values=None, selection=None, vmax
             v = np.repeat(v, counts)
         if v.shape[0] != nv:
             raise ValueError(f"error values: {v.shape[0]} entries for {nv} vertices / {ns} strands")
-        from .skinning import error_colors
+        from .groom.skinning import error_colors
 
         col = error_colors(v, vmax)
     elif mode == "strand":

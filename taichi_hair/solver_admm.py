@@ -2,12 +2,12 @@
 
 Per step (Sec. 4.2):
 
-1. collision detection                       -- ``contacts.ContactPipeline.detect`` (grid.py, contacts.py; Sec. 4.5)
+1. collision detection                       -- ``contacts.ContactPipeline.detect`` (contact/grid.py, contact/pipeline.py; Sec. 4.5)
 2. advect the initial guess x <- x_pred      -- ``admm.begin_step`` (x^t + dt v^t; BDF2 below)
 3. update DER frames                         -- ``frames.update_reference_frames``
 4. for each ADMM iteration:
    a. local elasticity solve -> y           -- ``elasticity.solve_local_elasticity`` (Sec. 4.4)
-   b. feasible projection -> z              -- ``ContactPipeline.project`` (projection.py; Sec. 4.5, Eq. 5-6)
+   b. feasible projection -> z              -- ``ContactPipeline.project`` (contact/projection.py; Sec. 4.5, Eq. 5-6)
    c. lambda_y <- lambda_y + y - Bx         -- fused into the local step (y - Bx is its increment);
       lambda_z <- lambda_z + z - x          -- ``projection.update_contact_duals``
    d. tridiagonal solve M dx = f            -- ``admm.assemble_position_system`` + ``tridiag`` (Sec. 4.3, Eq. 3)
@@ -145,9 +145,9 @@ class SolverADMM(StageTimer):
         #: Contacts (Sec. 4.5): hair-hair when config.contacts is set, bodies when colliders are given.
         self.contacts = None
         if cfg.contacts is not None or colliders:
-            from .colliders import ColliderSet
+            from .contact.colliders import ColliderSet
             from .config import ContactConfig
-            from .contacts import ContactPipeline
+            from .contact.pipeline import ContactPipeline
 
             ccfg = cfg.contacts if cfg.contacts is not None else ContactConfig(hair_hair=False)
             if colliders is not None and not isinstance(colliders, ColliderSet):

@@ -44,7 +44,7 @@ def short_rod():
 
 
 def test_flags_an_unstable_configuration_and_passes_a_stable_one(short_rod):
-    from taichi_hair.solver_xpbd import SolverXPBD, SolverXPBDConfig
+    from taichi_hair.solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
 
     cases, model, state, control = short_rod
     monitor = StrandMonitor(model)

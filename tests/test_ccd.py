@@ -15,7 +15,7 @@ def line(p0, p1, n):
 
 
 def _accd(a0, a1, b0, b1, da0, da1, db0, db1, xi):
-    from taichi_hair.ccd import accd_edge_edge
+    from taichi_hair.contact.ccd import accd_edge_edge
 
     pts = ti.Vector.field(3, float, 8)
     out = ti.field(float, 2)
@@ -55,7 +55,7 @@ def test_accd_time_of_impact_of_crossing_segments():
 def test_continuous_detection_finds_every_closing_pair_a_brute_force_finds():
     """Random moving edges: every pair whose sampled minimum distance over the step goes below the
     thickness (and that is not a proximity contact) gets an impact, and no pair that stays well apart."""
-    from taichi_hair.contacts import ContactPipeline
+    from taichi_hair.contact.pipeline import ContactPipeline
 
     rng = np.random.default_rng(11)
     mat = RodMaterial(radius=2e-4)

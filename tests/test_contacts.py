@@ -7,7 +7,7 @@ import pytest
 import taichi as ti
 
 from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
-from taichi_hair.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
+from taichi_hair.contact.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
 from taichi_hair.config import ContactConfig
 
 from geometry import segment_distance
@@ -22,7 +22,7 @@ def line(p0, p1, n):
 
 # --------------------------------------------------------------------------- local solve
 def _solve_many(w, n, mu):
-    from taichi_hair.projection import coulomb_local_solve
+    from taichi_hair.contact.projection import coulomb_local_solve
 
     k = len(w)
     wf = ti.Vector.field(3, float, k)
@@ -117,7 +117,7 @@ def test_detection_matches_brute_force_on_random_edges():
     model = b.finalize()
     st = model.state()
     cfg = ContactConfig(margin=2e-4, max_contacts_per_edge=6)
-    from taichi_hair.contacts import ContactPipeline
+    from taichi_hair.contact.pipeline import ContactPipeline
 
     pipe = ContactPipeline(model, cfg)
     pipe.colliders.begin_step(model.control())

@@ -113,7 +113,7 @@ def test_twist_is_kept_where_it_matters():
 
 # --------------------------------------------------------------------------- contacts
 def test_strands_apart_broad_phase():
-    from taichi_hair.grid import strands_apart
+    from taichi_hair.contact.grid import strands_apart
 
     lo = np.array([[0, 0, 0], [2, 0, 0], [4, 0, 0]], float)
     hi = lo + 1.0
@@ -210,7 +210,7 @@ def test_equilibrium_matches_a_long_damped_dynamic_run():
     """Four 10 cm horizontal cantilevers: the quasistatic equilibrium (estimated 1 um tolerance) and a 3 s
     dynamic run with strong air drag come to rest within 10 um of each other (measured 1.2 um)."""
     from taichi_hair.config import SolverADMMConfig
-    from taichi_hair.equilibrium import equilibrium
+    from taichi_hair.solvers.equilibrium import equilibrium
     from taichi_hair.solver_admm import SolverADMM
 
     model = _straight(n=4, m=21, length=0.1, gap=0.01, direction=(1.0, 0.0, 0.0))
@@ -230,7 +230,7 @@ def test_equilibrium_matches_a_long_damped_dynamic_run():
 
 def test_equilibrium_refuses_a_dynamic_solver_and_reports_non_convergence():
     from taichi_hair.config import SolverADMMConfig
-    from taichi_hair.equilibrium import equilibrium
+    from taichi_hair.solvers.equilibrium import equilibrium
     from taichi_hair.solver_admm import SolverADMM
 
     model = _straight(n=2, direction=(1.0, 0.0, 0.0))

@@ -1,4 +1,4 @@
-"""Procedural grooms (taichi_hair.generators) and the head mesh (assets/head.obj).
+"""Procedural grooms (taichi_hair.groom.generators) and the head mesh (assets/head.obj).
 
 Geometry is checked independently of the generator's voxel SDF: inside/outside
 by the exact generalised winding number of the closed mesh, distances by
@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from taichi_hair.generators import (HEAD_MESH_PATH, STYLES, GeneratorConfig, generate_groom, load_head,
+from taichi_hair.groom.generators import (HEAD_MESH_PATH, STYLES, GeneratorConfig, generate_groom, load_head,
                                     read_obj_groups, sphere_surface)
 
 

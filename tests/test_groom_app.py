@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from taichi_hair.cli import main
-from taichi_hair.grooming import GroomingConfig, GroomingSession
+from taichi_hair.groom.session import GroomingConfig, GroomingSession
 from taichi_hair.io import Groom, load_groom, save_groom
 from taichi_hair.render import ViewerGGUI, project
 

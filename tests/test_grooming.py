@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from taichi_hair.grooming import GroomingConfig, GroomingSession
+from taichi_hair.groom.session import GroomingConfig, GroomingSession
 from taichi_hair.io import Groom, load_groom
 
 NS, NV, LENGTH, CURL = 12, 10, 0.1, 0.004
@@ -550,7 +550,7 @@ def test_bulk_add_strands_gives_the_per_strand_host_arrays_bit_for_bit():
     """GroomBuilder.add_strands (vectorised, used by the session) equals add_strand per strand."""
     from taichi_hair.builder import GroomBuilder
     from taichi_hair.config import RodMaterial
-    from taichi_hair.grooming import _host_of
+    from taichi_hair.groom.session import _host_of
 
     rng = np.random.default_rng(3)
     lines = [np.cumsum(rng.normal(size=(int(rng.integers(3, 13)), 3)) * 0.01, axis=0) for _ in range(40)]

@@ -1,4 +1,4 @@
-"""Run quality (taichi_hair.quality), exact mesh queries (taichi_hair.mesh_query) and meshes with holes.
+"""Run quality (taichi_hair.quality), exact mesh queries (taichi_hair.contact.mesh_query) and meshes with holes.
 
 Each figure is checked on a hand-made frame whose answer has a closed form, stated in the test."""
 
@@ -8,8 +8,8 @@ import warnings
 import numpy as np
 import pytest
 
-from taichi_hair.colliders import MeshCollider, PlaneCollider, SphereCollider
-from taichi_hair.mesh_query import (TriangleMeshQuery, boundary_edges, count_boundary_loops,
+from taichi_hair.contact.colliders import MeshCollider, PlaneCollider, SphereCollider
+from taichi_hair.contact.mesh_query import (TriangleMeshQuery, boundary_edges, count_boundary_loops,
                                     point_triangle_distance_sq)
 from taichi_hair.quality import (body_penetration, frame_quality, quality_warnings,
                                  strain_statistics)

@@ -151,8 +151,8 @@ def test_strand_colors_modes_and_errors():
 def test_error_overlay_measures_the_distance_to_the_skinned_strands():
     """``--color error``: per strand, the largest distance between the strand and its reconstruction by
     skinning from the guides; 0 at rest, the displacement of a moved tip on that strand only."""
-    from taichi_hair.groom_cli import skinning_error
-    from taichi_hair.skinning import select_guides
+    from taichi_hair.cli.groom import skinning_error
+    from taichi_hair.groom.skinning import select_guides
 
     rng = np.random.default_rng(3)
     lines = []

@@ -1,4 +1,4 @@
-"""TOML scene files (taichi_hair.scene_file) and the shipped scenes.
+"""TOML scene files (taichi_hair.scene.file) and the shipped scenes.
 
 The command-line runs are subprocesses, as a user runs them.  The hairball scene runs (and is resumed) in
 ``tests/test_cli.py``, to keep each file's time down (Taichi compiles the kernels in every run).
@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from taichi_hair.scene_file import SceneError, euler_to_matrix, load_scene, matrix_to_quat, quat_to_matrix, slerp
+from taichi_hair.scene.file import SceneError, euler_to_matrix, load_scene, matrix_to_quat, quat_to_matrix, slerp
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "assets", "scenes")
@@ -137,7 +137,7 @@ def test_presets_head_turn_and_nod_reach_their_amplitude(tmp_path):
     assert abs(yaw(2.5)) < 1e-9
     R_nod = s.body_transforms(0.25 + 1.5 / 4)[1][0]
     assert math.isclose(math.degrees(math.atan2(R_nod[2, 1], R_nod[1, 1])), 15.0, abs_tol=1e-9)
-    from taichi_hair.scenes import hairball_rotation
+    from taichi_hair.scene.builtin import hairball_rotation
 
     assert np.array_equal(s.body_transforms(1.3)[2][0], hairball_rotation(1.3))
 
@@ -176,15 +176,15 @@ def test_shipped_scene_runs_headless(tmp_path, name):
 
 
 def test_shape_and_xpbd_solver_tables(tmp_path):
-    from taichi_hair.solver_shape import SolverShapeConfig
-    from taichi_hair.solver_xpbd import SolverXPBDConfig
+    from taichi_hair.solvers.shape.solver import SolverShapeConfig
+    from taichi_hair.solvers.xpbd.solver import SolverXPBDConfig
 
     groom = '[groom]\ngenerator = "straight"\nsurface = "sphere"\nstrands = 3\n'
     s = load_scene(write(tmp_path, groom + '[solver]\ntype = "shape"\nmethod = 1\n[solver.region]\n'
                                            'global_stiffness = 0.4\n[[colliders]]\ntype = "sphere"\nbody = 0\n'))
     assert isinstance(s.solver_config, SolverShapeConfig) and s.solver_config.method == 1
     assert s.solver_config.regions[0].global_stiffness == 0.4 and len(s.colliders) == 1
-    # Every collider kind is accepted (SolverShape takes the colliders of taichi_hair.colliders).
+    # Every collider kind is accepted (SolverShape takes the colliders of taichi_hair.contact.colliders).
     s = load_scene(write(tmp_path, groom + '[solver]\ntype = "shape"\n[[colliders]]\ntype = "plane"\n'))
     assert type(s.colliders[0]).__name__ == "PlaneCollider" and not hasattr(s.solver_config, "colliders")
     with pytest.raises(SceneError, match=r"\[solver.region\].*ShapeRegion.damping"):
@@ -199,7 +199,7 @@ def test_shape_scene_with_a_mesh_collider_keeps_the_hair_out_of_the_head(tmp_pat
     second no free vertex is inside the head by the reference signed distance (the generator's own
     96^3 SDF of assets/head.obj, another grid than the collider's 64^3), within 0.1 mm; without the
     collider, the same hair sinks centimetres into the head (so the check can fail)."""
-    from taichi_hair.generators import load_head
+    from taichi_hair.groom.generators import load_head
 
     head = os.path.join(ROOT, "assets", "head.obj")
     text = ('[scene]\nfps = 24.0\nsubsteps = 4\n'

@@ -1,4 +1,4 @@
-"""Guides and linear blend skinning (taichi_hair.skinning, Daviet 2023 Sec. 5.3)."""
+"""Guides and linear blend skinning (taichi_hair.groom.skinning, Daviet 2023 Sec. 5.3)."""
 
 import math
 
@@ -7,8 +7,8 @@ import pytest
 import taichi as ti
 
 from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
-from taichi_hair.scenes import _fibonacci_lower_cap, strand_along
-from taichi_hair.skinning import (
+from taichi_hair.scene.builtin import _fibonacci_lower_cap, strand_along
+from taichi_hair.groom.skinning import (
     SkinningConfig,
     SkinningLBS,
     build_guides,

@@ -5,7 +5,7 @@ the paper's limit cases (S_G = 1 freezes a strand, Sec. 3.3; many local iteratio
 converge to the rest shape whatever the transform method, Sec. 3.4 and 4.2) and
 against simple invariants (roots follow the head exactly, no penetration after the
 collision stage, velocities are (x - x^t)/dt, identical runs give identical bits); the
-collision stage against each collider kind of taichi_hair.colliders, on a moving body, and
+collision stage against each collider kind of taichi_hair.contact.colliders, on a moving body, and
 its Coulomb friction against the closed-form sliding of a strand on a slope.
 """
 
@@ -18,8 +18,8 @@ import taichi as ti
 
 from taichi_hair import GroomBuilder, SimulationDivergedError
 from taichi_hair import shape_constraints as sc
-from taichi_hair.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
-from taichi_hair.solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
+from taichi_hair.contact.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
+from taichi_hair.solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
 
 DT = 1.0 / 60.0
 #: SolverShapeConfig fields a test may set through Rig.configure (the others are fixed per rig).
@@ -884,7 +884,7 @@ def test_step_allocates_no_fields(curly_rig, monkeypatch):
 def test_scene_file_solver_table_sets_the_shape_solver_fields(tmp_path):
     """A scene file's [solver] table (type = "shape") sets SolverShapeConfig's fields, infinite threshold
     included; a bad value is a SceneError naming the field."""
-    from taichi_hair.scene_file import SceneError, load_scene
+    from taichi_hair.scene.file import SceneError, load_scene
 
     groom = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "assets", "ponytail", "tail.tfx")
     text = (f'[groom]\nfile = "{groom}"\nscale = 0.0035\nstrands = 4\n[solver]\ntype = "shape"\nsubsteps = 3\n'

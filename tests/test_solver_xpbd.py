@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from taichi_hair import GroomBuilder, RodMaterial, SimulationDivergedError
-from taichi_hair.solver_xpbd import SolverXPBD, SolverXPBDConfig
+from taichi_hair.solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
 from taichi_hair.validation.cantilever import discrete_linear_tip_deflection
 from taichi_hair.validation.elastica import cantilever_gamma
 

@@ -20,9 +20,9 @@ import taichi as ti
 
 ti.init(arch=ti.cpu, log_level=ti.WARN)
 from taichi_hair import SolverADMM, SolverADMMConfig  # noqa: E402
-from taichi_hair.colliders import SphereCollider  # noqa: E402
+from taichi_hair.contact.colliders import SphereCollider  # noqa: E402
 from taichi_hair.config import ContactConfig  # noqa: E402
-from taichi_hair.scenes import HairballScene, build_hairball, hairball_rotation  # noqa: E402
+from taichi_hair.scene.builtin import HairballScene, build_hairball, hairball_rotation  # noqa: E402
 
 N, frames = int(sys.argv[1]), int(sys.argv[2])
 kv = dict(a.split("=") for a in sys.argv[3:])

@@ -21,7 +21,7 @@ import taichi as ti
 ti.init(arch=ti.cpu, log_level=ti.WARN)
 from taichi_hair import GroomBuilder, SolverADMM, SolverADMMConfig, RodMaterial
 from taichi_hair.config import ContactConfig
-from taichi_hair.generators import load_head, generate_groom, GeneratorConfig
+from taichi_hair.groom.generators import load_head, generate_groom, GeneratorConfig
 N = int(sys.argv[1])
 t = time.time()
 g = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=N, vertices_per_strand=14, length=0.25, seed=0))

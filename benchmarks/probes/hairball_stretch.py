@@ -18,8 +18,8 @@ import taichi as ti
 ti.init(arch=ti.cpu, log_level=ti.WARN)
 from taichi_hair import SolverADMM, SolverADMMConfig
 from taichi_hair.config import ContactConfig
-from taichi_hair.colliders import SphereCollider
-from taichi_hair.scenes import HairballScene, build_hairball, hairball_rotation
+from taichi_hair.contact.colliders import SphereCollider
+from taichi_hair.scene.builtin import HairballScene, build_hairball, hairball_rotation
 mode = sys.argv[1]; N = int(sys.argv[2]); frames = int(sys.argv[3])  # noqa: E702
 scene = HairballScene(strands=N, length=0.3)
 model = build_hairball(scene)

@@ -4,7 +4,7 @@ of its equilibrium in 2 s of simulated time").
 Run from the repository root:
     python3 benchmarks/probes/hang_settle.py [STRANDS] [DURATION_S] [drag=RATE_PER_S] [W0 ...]
 
-The built-in hang scene's groom (taichi_hair.scenes.build_hang) with the sphere held still (no nod), its
+The built-in hang scene's groom (taichi_hair.scene.builtin.build_hang) with the sphere held still (no nod), its
 default material (no strain-rate damping, no air drag: backward Euler's own damping only), dynamic ADMM at
 dt = 1/96 s and 10 iterations (optional air drag: a velocity relaxation rate, as the stability atlas), released from the groom as built.  The reference is the same Model's
 equilibrium (quasistatic ADMM, w0 = 1, 3,000 steps of 10 iterations).  Prints, per w0, the largest and the
@@ -22,7 +22,7 @@ import taichi as ti  # noqa: E402
 
 ti.init(arch=ti.cpu, log_level=ti.WARN)
 from taichi_hair import SolverADMM, SolverADMMConfig  # noqa: E402
-from taichi_hair.scenes import HangScene, build_hang  # noqa: E402
+from taichi_hair.scene.builtin import HangScene, build_hang  # noqa: E402
 
 strands = int(sys.argv[1]) if len(sys.argv) > 1 else 30
 duration = float(sys.argv[2]) if len(sys.argv) > 2 else 2.0

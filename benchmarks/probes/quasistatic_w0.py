@@ -8,7 +8,7 @@ import numpy as np
 import taichi as ti
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..'))
 ti.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
-from taichi_hair.scenes import HangScene, build_hang
+from taichi_hair.scene.builtin import HangScene, build_hang
 from taichi_hair.config import SolverADMMConfig
 from taichi_hair.solver_admm import SolverADMM
 hs = HangScene(strands=20, length=0.2, seed=0)

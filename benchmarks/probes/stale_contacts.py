@@ -18,8 +18,8 @@ ti.init(arch=ti.cpu, log_level=ti.WARN)
 from geometry import segment_distance
 from taichi_hair import SolverADMM, SolverADMMConfig
 from taichi_hair.config import ContactConfig
-from taichi_hair.colliders import SphereCollider
-from taichi_hair.scenes import HairballScene, build_hairball, hairball_rotation
+from taichi_hair.contact.colliders import SphereCollider
+from taichi_hair.scene.builtin import HairballScene, build_hairball, hairball_rotation
 scene = HairballScene(strands=100, length=0.3)
 model = build_hairball(scene)
 cfg = SolverADMMConfig(iterations=10, contacts=ContactConfig(friction=0.2, projection_iterations=2, correction_iterations=0))

@@ -104,10 +104,10 @@ def solver_config_for(choice: MethodChoice, admm_config=None):
         base = admm_config if admm_config is not None else SolverADMMConfig()
         return replace(base, iterations=int(p.iterations), **ADMM_VARIANTS[p.method])
     if choice.solver == "shape":
-        from ..solver_shape import ShapeRegion, SolverShapeConfig
+        from ..solvers.shape.solver import ShapeRegion, SolverShapeConfig
 
         region = ShapeRegion(local_iterations=int(p.iterations), length_iterations=int(p.iterations))
         return SolverShapeConfig(method=int(p.shape_method), regions=(region,))
-    from ..solver_xpbd import SolverXPBDConfig
+    from ..solvers.xpbd.solver import SolverXPBDConfig
 
     return SolverXPBDConfig(substeps=int(p.substeps))

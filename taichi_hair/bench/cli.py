@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 
-from ..cli_common import CLIError, _add_common, _init_taichi
+from ..cli.common import CLIError, _add_common, _init_taichi
 
 STUDIES = ("stability", "pareto")
 

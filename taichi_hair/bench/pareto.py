@@ -215,14 +215,14 @@ def _make_solver(spec: RunSpec, model, scene: Scene):
         return SolverADMM(model, admm_config(spec.method, iterations=spec.iterations,
                                              air_viscosity=scene.drag_rate * rho_a, check_finite=False))
     if spec.method == "shape":
-        from ..solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
+        from ..solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
 
         region = ShapeRegion(local_iterations=spec.iterations, length_iterations=spec.iterations,
                              damping=1.0 - math.exp(-scene.drag_rate * spec.dt))
         return SolverShape(model, SolverShapeConfig(method=spec.shape_method, regions=(region,), air_drag=0.0,
                                                     check_finite=False))
     if spec.method == "xpbd":
-        from ..solver_xpbd import SolverXPBD, SolverXPBDConfig
+        from ..solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
 
         return SolverXPBD(model, SolverXPBDConfig(substeps=spec.substeps, damping=scene.drag_rate, check_finite=False))
     raise ValueError(f"unknown method {spec.method!r}")
@@ -551,7 +551,7 @@ def format_summary(points, infos) -> str:
 # --------------------------------------------------------------------------- command
 def cmd_pareto(args, methods) -> int:
     """``taichi-hair bench pareto``: f64 worker (reference, admm_f64), then the f32 sweep in this process."""
-    from ..cli_common import CLIError, _init_taichi
+    from ..cli.common import CLIError, _init_taichi
 
     scenes = tuple(s.strip() for s in args.scenes.split(",") if s.strip())
     bad = [s for s in scenes if s not in SCENES]

@@ -256,13 +256,13 @@ def make_solver(method: str, model, drag_rate: float, knob: int, dt: float):
         return SolverADMM(model, admm_config(method, iterations=knob, air_viscosity=drag_rate * rho_a,
                                              check_finite=False))
     if method == "shape":
-        from ..solver_shape import ShapeRegion, SolverShape, SolverShapeConfig
+        from ..solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
 
         region = ShapeRegion(local_iterations=knob, length_iterations=knob,
                              damping=1.0 - math.exp(-drag_rate * dt))
         return SolverShape(model, SolverShapeConfig(regions=(region,), air_drag=0.0, check_finite=False))
     if method == "xpbd":
-        from ..solver_xpbd import SolverXPBD, SolverXPBDConfig
+        from ..solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
 
         return SolverXPBD(model, SolverXPBDConfig(substeps=knob, iterations=1, damping=drag_rate,
                                                   check_finite=False))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from ..cli_common import CLIError, _add_common, _init_taichi
+from ..cli.common import CLIError, _add_common, _init_taichi
 
 EXPERIMENTS = ("cantilever", "stick-slip", "bend-twist")
 

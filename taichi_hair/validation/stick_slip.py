@@ -257,7 +257,7 @@ def run_stick_slip(mus=None, length: float = 0.1, edge_length: float = 2.5e-3, s
     taken from the SolverADMMConfig default.
     """
     from .. import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
-    from ..colliders import PlaneCollider
+    from ..contact.colliders import PlaneCollider
     from ..config import ContactConfig
 
     gamma = stick_slip_gamma(length, gravity)

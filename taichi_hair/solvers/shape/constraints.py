@@ -1,4 +1,4 @@
-"""Kernels of :class:`taichi_hair.solver_shape.SolverShape` (Han & Harada 2012, "Real-time Hair
+"""Kernels of :class:`taichi_hair.solvers.shape.solver.SolverShape` (Han & Harada 2012, "Real-time Hair
 Simulation with Efficient Hair Style Preservation").
 
 One stage per kernel, in the order of the paper's Algorithm 1; the math lives in
@@ -11,7 +11,7 @@ One stage per kernel, in the order of the paper's Algorithm 1; the math lives in
 * :func:`local_shape_correction` -- the two-vertex update of Eq. 4;
 * :func:`edge_length_correction` -- the PBD distance constraint [MHHR07];
 * :func:`project_out_of_collider` -- Sec. 3.5, against any collider of
-  :mod:`taichi_hair.colliders` (plane, sphere, capsule, mesh SDF), with an
+  :mod:`taichi_hair.contact.colliders` (plane, sphere, capsule, mesh SDF), with an
   optional position-based Coulomb friction.
 
 Kernel arguments follow the package convention: ``model`` (static groom data),
@@ -27,7 +27,7 @@ position of vertex i is ``^{i-1}P_i^0 = R_{i-1}^{0 T} (P_i^0 - P_{i-1}^0)``.
 
 import taichi as ti
 
-from .colliders import acts_on, body_transform, collider_distance
+from ...contact.colliders import acts_on, body_transform, collider_distance
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
@@ -209,7 +209,7 @@ def edge_length_correction(x_a: vec3, x_b: vec3, rest_length: float, w_a: float,
 
 @ti.func
 def project_out_of_collider(cs: ti.template(), c: ti.i32, p: vec3, p_begin: vec3, radius: float) -> vec3:
-    """Sec. 3.5 against collider ``c`` of the :class:`~taichi_hair.colliders.ColliderSet` ``cs``.
+    """Sec. 3.5 against collider ``c`` of the :class:`~taichi_hair.contact.colliders.ColliderSet` ``cs``.
 
     ``p`` is the vertex after the constraints, ``p_begin`` the same vertex at the beginning of the step
     (x^t), ``radius`` the hair radius [m].  If the signed distance d of ``p`` to the collider (at the

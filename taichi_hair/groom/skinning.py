@@ -58,11 +58,11 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from .builder import GroomBuilder, points_array
-from .config import RodMaterial
-from .model import Model, _np_float
-from .state import Control, State
-from .strains import parallel_transport
+from ..builder import GroomBuilder, points_array
+from ..config import RodMaterial
+from ..model import Model, _np_float
+from ..state import Control, State
+from ..strains import parallel_transport
 
 vec3 = ti.math.vec3
 FRAMES = ("transport", "material")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .cli_common import CLIError
+from .common import CLIError
 
 
 # --------------------------------------------------------------------------- main
@@ -20,11 +20,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     # One module per command family; each owns its arguments and its work.
-    from .bench.cli import register as register_bench
-    from .cli_simulate import register as register_simulate
-    from .groom_cli import register as register_groom
-    from .io.cli import register as register_io
-    from .validation.cli import register as register_validate
+    from ..bench.cli import register as register_bench
+    from .simulate import register as register_simulate
+    from .groom import register as register_groom
+    from ..io.cli import register as register_io
+    from ..validation.cli import register as register_validate
 
     register_simulate(sub)
     register_validate(sub)

@@ -8,7 +8,7 @@ few ADMM iterations (``GroomingConfig.iterations``, 10 in the paper) of
 (``velocity_margin=0``), so the groom settles under gravity, elasticity and
 contacts while it is edited.  As in the paper only a fraction of the strands
 (``guide_ratio``) is simulated; the others follow by linear blend skinning
-(:mod:`taichi_hair.skinning`).
+(:mod:`taichi_hair.groom.skinning`).
 
 Editing actions are methods, each logged with its parameters (``session.log``,
 written by :meth:`~GroomingSession.write_log` as ``session.json`` and replayed
@@ -96,7 +96,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
-from .io import Groom, load_groom, save_groom
+from ..io import Groom, load_groom, save_groom
 
 MODES = ("replace", "add", "remove")
 #: Actions that change the groom or the simulation set-up: each pushes an undo snapshot.
@@ -395,7 +395,7 @@ def _host_of(builder) -> tuple[dict, list]:
     GroomBuilder has no host-only finalize; this calls ``finalize`` with the module's ``Model``
     class swapped for a capture for the duration of the call (single-threaded use only).
     """
-    from . import builder as builder_module
+    from .. import builder as builder_module
 
     class _Captured(Exception):
         pass
@@ -1256,7 +1256,7 @@ class GroomingSession:
     def _guide_setup(self):
         """Guide strands, their rest vertices (float64, flat) and offsets, and the material of the
         current config."""
-        from .config import RodMaterial
+        from ..config import RodMaterial
 
         g, cfg = self.groom, self.config
         off = g.strand_offsets
@@ -1276,7 +1276,7 @@ class GroomingSession:
         """The guides' GroomBuilder (bulk :meth:`GroomBuilder.add_strands`): roots clamped to body 0
         (the head); two bodies, the second the comb's (``COMB_BODY``), so a comb stroke needs no new
         Model."""
-        from .builder import GroomBuilder
+        from ..builder import GroomBuilder
 
         builder = GroomBuilder(body_count=COMB_BODY + 1)
         builder.add_strands(guide_rest[0], guide_rest[1], material, root="clamped", body=0)
@@ -1289,11 +1289,11 @@ class GroomingSession:
             return
         from types import SimpleNamespace
 
-        from .colliders import CapsuleCollider
-        from .config import ContactConfig, SolverADMMConfig
-        from .model import _np_float
+        from ..contact.colliders import CapsuleCollider
+        from ..config import ContactConfig, SolverADMMConfig
+        from ..model import _np_float
         from .skinning import SkinningConfig, SkinningLBS
-        from .solver_admm import SolverADMM
+        from ..solver_admm import SolverADMM
 
         t0 = time.perf_counter()
         g, cfg = self.groom, self.config

@@ -6,7 +6,7 @@
     taichi-hair variants GROOM --count 12 --out DIR
 
 GROOM is any file :func:`taichi_hair.io.load_groom` reads; left out, a procedural groom
-(:mod:`taichi_hair.generators`) on the default head ``assets/head.obj``.  Errors are one line on
+(:mod:`taichi_hair.groom.generators`) on the default head ``assets/head.obj``.  Errors are one line on
 stderr and a non-zero exit: a groom that fails to load gives the loader's message; a session file
 with an unknown action or a bad value names the entry, its line and the action.
 """
@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from .cli_common import CLIError, _init_taichi
+from .common import CLIError, _init_taichi
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -43,10 +43,10 @@ def _add_groom_source(p, optional: bool) -> None:
 
 def load_groom_arg(args):
     """The groom of the command line: a file (the loader's message on failure) or a generated default."""
-    from .io import load_groom
+    from ..io import load_groom
 
     if args.groom in (None, "default"):
-        from .generators import GeneratorConfig, generate_groom
+        from ..groom.generators import GeneratorConfig, generate_groom
 
         if args.strands < 1 or args.vertices < 3:
             raise CLIError("--strands must be >= 1 and --vertices >= 3")
@@ -61,7 +61,7 @@ def load_groom_arg(args):
 
 
 def _default_surface(head_arg):
-    from .generators import HEAD_MESH_PATH, load_head, sphere_surface
+    from ..groom.generators import HEAD_MESH_PATH, load_head, sphere_surface
 
     if head_arg == "none":
         return sphere_surface(0.09)
@@ -75,7 +75,7 @@ def load_head_mesh(head_arg):
     """(vertices, triangles, path) of the --head argument, or None for 'none'."""
     if head_arg == "none":
         return None
-    from .generators import HEAD_MESH_PATH, read_obj_groups
+    from ..groom.generators import HEAD_MESH_PATH, read_obj_groups
 
     path = HEAD_MESH_PATH if head_arg == "default" else head_arg
     if not os.path.exists(path):
@@ -106,7 +106,7 @@ def _add_camera(p) -> None:
 
 
 def camera_from_args(args, points, head=None):
-    from .render import CameraConfig
+    from ..render import CameraConfig
 
     pts = np.asarray(points, np.float64).reshape(-1, 3)
     if head is not None:
@@ -135,9 +135,9 @@ def skinning_error(groom, guide_ratio: float = 0.1, neighbour_count: int = 4, se
     """Per-strand interpolation error [m]: max distance between each strand of ``groom.points`` and its
     reconstruction by linear blend skinning from the guides (the strands a session would simulate),
     bound in the rest pose (``rest_points``, else ``points``).  Guides are 0 by construction."""
-    from .builder import GroomBuilder
-    from .config import RodMaterial
-    from .skinning import SkinningConfig, SkinningLBS, interpolation_error, select_guides
+    from ..builder import GroomBuilder
+    from ..config import RodMaterial
+    from ..groom.skinning import SkinningConfig, SkinningLBS, interpolation_error, select_guides
 
     rest = (groom.rest_points if groom.rest_points is not None else groom.points).astype(np.float64)
     off = groom.strand_offsets
@@ -157,7 +157,7 @@ def skinning_error(groom, guide_ratio: float = 0.1, neighbour_count: int = 4, se
 
 
 def _colors_for(groom, mode, selection=None):
-    from .render import strand_colors
+    from ..render import strand_colors
 
     values = skinning_error(groom) if mode == "error" else None
     return strand_colors(groom, mode, values, selection=selection)
@@ -165,7 +165,7 @@ def _colors_for(groom, mode, selection=None):
 
 # =========================================================================== render
 def cmd_render(args) -> int:
-    from .render import ViewerGGUI, save_png
+    from ..render import ViewerGGUI, save_png
 
     w, h = _check_size(args)
     groom = load_groom_arg(args)
@@ -198,7 +198,7 @@ def session_config(groom, args):
     """GroomingConfig: the groom's saved ``params['grooming']``, else defaults, then the command line."""
     from dataclasses import replace
 
-    from .grooming import GroomingConfig
+    from ..groom.session import GroomingConfig
 
     stored = groom.params.get("grooming") if isinstance(groom.params, dict) else None
     try:
@@ -219,7 +219,7 @@ def head_colliders(head, cfg_contacts: bool):
     """A static MeshCollider of the head when contacts are on (proximity only, as the session sets)."""
     if head is None or not cfg_contacts:
         return []
-    from .colliders import MeshCollider
+    from ..contact.colliders import MeshCollider
 
     return [MeshCollider(head[2], body=-1, friction=0.3)]
 
@@ -240,8 +240,8 @@ def cmd_groom(args) -> int:
 
 def run_offscreen(args) -> int:
     """Replay ``--script`` on the groom and write PNG frames, the edited groom and the log to ``--out``."""
-    from .grooming import EDIT_ACTIONS, GroomingSession
-    from .render import ViewerGGUI, save_png, strand_colors
+    from ..groom.session import EDIT_ACTIONS, GroomingSession
+    from ..render import ViewerGGUI, save_png, strand_colors
 
     if not args.script:
         raise CLIError("--offscreen needs --script SESSION.json")
@@ -308,7 +308,7 @@ def run_offscreen(args) -> int:
 
 # =========================================================================== variants
 def cmd_variants(args) -> int:
-    from .variants import VariantConfig, make_variants
+    from ..scene.variants import VariantConfig, make_variants
 
     if args.count < 1:
         raise CLIError("--count must be >= 1")

@@ -1,6 +1,6 @@
 """TOML scene files: a groom, body colliders and their animation, a solver, frames and output.
 
-    from taichi_hair.scene_file import load_scene
+    from taichi_hair.scene.file import load_scene
     scene = load_scene("assets/scenes/head_turn.toml", overrides={"frames": 2, "strands": 20})
     model = scene.build_model()                 # after ti.init
     solver = scene.make_solver(model)
@@ -23,7 +23,7 @@ degrees; relative paths are relative to the scene file)::
     strands = 100                # optional: keep this many strands, evenly spaced through the file
     root = "clamped"             # "clamped" (roots follow `body`) or "free"
     body = 0                     # body the roots are clamped to
-    # ... or a generator (taichi_hair.generators.GeneratorConfig fields; style = the generator name):
+    # ... or a generator (taichi_hair.groom.generators.GeneratorConfig fields; style = the generator name):
     generator = "wavy"           # "straight", "wavy" or "curly"
     surface = "head"             # "head" (assets/head.obj), "sphere", or a mesh path (OBJ, group "scalp")
     sphere_radius = 0.09         # surface = "sphere": radius [m] ...
@@ -338,7 +338,7 @@ class Scene:
         material: RodMaterial fields (dict); ``radius`` from the groom per strand unless given.
         solver: "admm", "shape" or "xpbd".
         solver_config: the solver's config dataclass.
-        colliders: collider objects of :mod:`taichi_hair.colliders`.
+        colliders: collider objects of :mod:`taichi_hair.contact.colliders`.
         bodies: one :class:`BodyAnimation` per body.
         output: default output path ("" when none), resolved against the current directory.
         description: JSON-able description of everything that determines the result
@@ -380,8 +380,8 @@ class Scene:
         """The Model (allocates Taichi fields: call after ``ti.init``)."""
         if self.model_builder is not None:
             return self.model_builder()
-        from .builder import GroomBuilder
-        from .config import RodMaterial
+        from ..builder import GroomBuilder
+        from ..config import RodMaterial
 
         b = GroomBuilder(body_count=self.body_count)
         g = self.groom
@@ -400,14 +400,14 @@ class Scene:
     def make_solver(self, model, profile: bool = False):
         """The solver of the scene, with its colliders."""
         if self.solver == "admm":
-            from .solver_admm import SolverADMM
+            from ..solver_admm import SolverADMM
 
             return SolverADMM(model, self.solver_config, profile=profile, colliders=self.colliders or None)
         if self.solver == "shape":
-            from .solver_shape import SolverShape
+            from ..solvers.shape.solver import SolverShape
 
             return SolverShape(model, self.solver_config, profile=profile, colliders=self.colliders or None)
-        from .solver_xpbd import SolverXPBD
+        from ..solvers.xpbd.solver import SolverXPBD
 
         return SolverXPBD(model, self.solver_config)
 
@@ -419,7 +419,7 @@ def _resolve(base_dir: str, p: str) -> str:
 
 def _subsample(groom, count: int):
     """``count`` strands evenly spaced through the groom (all when it has fewer)."""
-    from .io.groom import Groom
+    from ..io.groom import Groom
 
     ns = groom.strand_count
     if count >= ns:
@@ -444,9 +444,9 @@ def _subsample(groom, count: int):
 
 
 def _load_groom_table(t: _Table, base: str, overrides: dict, desc: dict):
-    from .generators import STYLES, GeneratorConfig, generate_groom, load_head, sphere_surface
-    from .io import UnitsWarning, load_groom, units_warning
-    from .io.groom import Groom
+    from ..groom.generators import STYLES, GeneratorConfig, generate_groom, load_head, sphere_surface
+    from ..io import UnitsWarning, load_groom, units_warning
+    from ..io.groom import Groom
 
     root = t.get("root", "str", "clamped", lambda v: None if v in ("clamped", "free") else
                  f"must be 'clamped' or 'free', got {v!r}")
@@ -534,7 +534,7 @@ def _load_groom_table(t: _Table, base: str, overrides: dict, desc: dict):
 
 
 def _collider(t: _Table, base: str):
-    from .colliders import CapsuleCollider, MeshCollider, PlaneCollider, SphereCollider
+    from ..contact.colliders import CapsuleCollider, MeshCollider, PlaneCollider, SphereCollider
 
     kind = t.get("type", "str", None, lambda v: None if v in COLLIDER_TYPES else
                  f"must be one of {', '.join(COLLIDER_TYPES)}, got {v!r}")
@@ -628,7 +628,7 @@ def _body(t: _Table):
         return BodyAnimation(pivot=pivot, description=desc)
     if preset == "hairball":
         t.done()
-        from .scenes import hairball_rotation
+        from .builtin import hairball_rotation
 
         return BodyAnimation(function=hairball_rotation, pivot=pivot, description=desc)
     default_amp = 40.0 if preset == "head_turn" else 15.0
@@ -644,9 +644,9 @@ def _body(t: _Table):
 
 
 def _solver(t: _Table, overrides: dict, colliders: list):
-    from .config import ContactConfig, SolverADMMConfig
-    from .solver_shape import ShapeRegion, SolverShapeConfig
-    from .solver_xpbd import SolverXPBDConfig
+    from ..config import ContactConfig, SolverADMMConfig
+    from ..solvers.shape.solver import ShapeRegion, SolverShapeConfig
+    from ..solvers.xpbd.solver import SolverXPBDConfig
 
     kind = t.get("type", "str", "admm", lambda v: None if v in SOLVERS else
                  f"must be one of {', '.join(SOLVERS)}, got {v!r}")
@@ -739,7 +739,7 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     gdesc = {}
     groom, root, body = _load_groom_table(_Table(path, "groom", data["groom"]), base, overrides, gdesc)
     mt = _Table(path, "material", data.get("material", {}))
-    from .config import RodMaterial
+    from ..config import RodMaterial
 
     material = mt.rest()
     _dataclass_from(mt, RodMaterial, material, "RodMaterial")  # validate now, with the table's name

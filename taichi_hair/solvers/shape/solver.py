@@ -2,7 +2,7 @@
 with Efficient Hair Style Preservation", as a short sequence of kernel launches.
 
 Per step, ``config.substeps`` times over ``dt / substeps`` (the paper's Algorithm 1 with two stages of
-AMD's TressFX 4 and one of Mueller et al. 2012; kernels in :mod:`taichi_hair.shape_constraints`):
+AMD's TressFX 4 and one of Mueller et al. 2012; kernels in :mod:`taichi_hair.solvers.shape.constraints`):
 
 1. head transform W_T_H of each strand        -- ``interpolate_body_transforms``,
    ``compute_head_rotations`` (Sec. 3.1), at the end of the substep
@@ -17,7 +17,7 @@ AMD's TressFX 4 and one of Mueller et al. 2012; kernels in :mod:`taichi_hair.sha
    Method 3 ``apply_local_shape_constraints_batch(use_rest=True)`` (Algorithm 5, rest transforms)
 5. edge length constraints, iterated         -- ``solve_edge_lengths_batch`` [MHHR07]
 6. collision handling                        -- ``project_collisions`` (Sec. 3.5), against the colliders of
-   :mod:`taichi_hair.colliders` (planes, spheres, capsules, mesh SDFs), the ones SolverADMM uses
+   :mod:`taichi_hair.contact.colliders` (planes, spheres, capsules, mesh SDFs), the ones SolverADMM uses
 6b. exact lengths, root to tip               -- ``follow_the_leader`` (Mueller et al. 2012)
 7. v = (x - x^t)/dt - s d_{i+1}/dt           -- ``end_substep``; after the last substep ``find_non_finite``
 
@@ -135,11 +135,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import taichi as ti
 
-from .profiling import StageTimer
-from . import shape_constraints as sc
-from .errors import SimulationDivergedError
-from .model import Model, _np_float
-from .state import Control, State
+from ...profiling import StageTimer
+from . import constraints as sc
+from ...errors import SimulationDivergedError
+from ...model import Model, _np_float
+from ...state import Control, State
 
 METHODS = (1, 2, 3)
 #: Profiled stages (``SolverShape(profile=True)``).
@@ -282,9 +282,9 @@ class SolverShape(StageTimer):
             ``[0, len(config.regions))``; default all 0.
         profile: if True, synchronise after each stage and accumulate wall times in
             ``stage_seconds`` (slower; for benchmarks).
-        colliders: bodies the hair collides with: :class:`~taichi_hair.colliders.PlaneCollider`,
+        colliders: bodies the hair collides with: :class:`~taichi_hair.contact.colliders.PlaneCollider`,
             ``SphereCollider``, ``CapsuleCollider``, ``MeshCollider``, or a built
-            :class:`~taichi_hair.colliders.ColliderSet` (as SolverADMM takes them); None: none.
+            :class:`~taichi_hair.contact.colliders.ColliderSet` (as SolverADMM takes them); None: none.
 
     Regions, strand regions and colliders may be edited between steps (an interactive tool's
     sliders, Sec. 6 Fig. 4): change ``config.regions`` and call :meth:`upload_regions`, call
@@ -311,7 +311,7 @@ class SolverShape(StageTimer):
         region_*: the :class:`ShapeRegion` values, shape (region_count,).
         vertex_collision_radius: hair radius of the vertex's strand (``RodMaterial.radius``), the
             distance kept from colliders [m].
-        colliders: the :class:`~taichi_hair.colliders.ColliderSet` (its own fields), or None.
+        colliders: the :class:`~taichi_hair.contact.colliders.ColliderSet` (its own fields), or None.
     """
 
     def __init__(self, model: Model, config: SolverShapeConfig | None = None, strand_region=None,
@@ -425,12 +425,12 @@ class SolverShape(StageTimer):
         self.strand_region.from_numpy(self._check_strand_region(strand_region))
 
     def set_colliders(self, colliders) -> None:
-        """Replace the colliders (a list of :mod:`taichi_hair.colliders` objects, a ``ColliderSet``, or
+        """Replace the colliders (a list of :mod:`taichi_hair.contact.colliders` objects, a ``ColliderSet``, or
         None/empty for none).  A list is built into a new ``ColliderSet`` here (this allocates: call it
         between steps, not inside one).  As for any new ``ColliderSet``, the first step after this one
         sees no body motion (its begin-of-step transforms are its end-of-step ones), which only matters
         to friction."""
-        from .colliders import ColliderSet
+        from ...contact.colliders import ColliderSet
 
         if colliders is None or (not isinstance(colliders, ColliderSet) and len(colliders) == 0):
             self.colliders = None

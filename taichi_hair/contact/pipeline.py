@@ -1,7 +1,7 @@
 """Narrow phase and contact buffers (Daviet 2023, Sec. 4.5), run once at the beginning of a step.
 
-From the per-edge candidate lists of :mod:`taichi_hair.grid` and the body
-colliders of :mod:`taichi_hair.colliders`, build the contact list:
+From the per-edge candidate lists of :mod:`taichi_hair.contact.grid` and the body
+colliders of :mod:`taichi_hair.contact.colliders`, build the contact list:
 
 * hair-hair: the pair (a, b) is a contact when b is among the 6 closest of a
   or a among the 6 closest of b (the paper discards a contact "not among the 6
@@ -305,12 +305,12 @@ class ContactPipeline:
     Args:
         model: the Model.
         config: :class:`~taichi_hair.config.ContactConfig`.
-        colliders: a :class:`~taichi_hair.colliders.ColliderSet` or ``None``.
+        colliders: a :class:`~taichi_hair.contact.colliders.ColliderSet` or ``None``.
     """
 
     def __init__(self, model, config, colliders=None):
         from .colliders import ColliderSet
-        from .fields import BoxGridFields, CCDFields, ContactFields, GridFields, StrandBoxFields
+        from ..fields import BoxGridFields, CCDFields, ContactFields, GridFields, StrandBoxFields
 
         self.model = model
         self.config = config
@@ -358,7 +358,7 @@ class ContactPipeline:
         """(Re)compute the per-vertex contact coefficients from the Model (after an in-place Model update)."""
         import numpy as np
 
-        from .model import _np_float
+        from ..model import _np_float
 
         model = self.model
         h = model.host
@@ -388,7 +388,7 @@ class ContactPipeline:
 
         import numpy as np
 
-        from .fields import ContactFields
+        from ..fields import ContactFields
         from .grid import compute_edge_bounds, find_candidates, proximity_boxes
 
         m, cfg, g = self.model, self.config, self.grid
@@ -455,9 +455,9 @@ class ContactPipeline:
 
     def detect_continuous(self, x0, x) -> int:
         """Continuous-time detection from x0 (begin of step) to x (current iterate); appends the new
-        impacts as contacts (module :mod:`taichi_hair.ccd`) and returns how many it added."""
+        impacts as contacts (module :mod:`taichi_hair.contact.ccd`) and returns how many it added."""
         from .ccd import count_impact_contacts, find_impacts, swept_boxes, write_impact_contacts
-        from .fields import CCDFields
+        from ..fields import CCDFields
 
         m, cfg = self.model, self.config
         if not cfg.hair_hair:
@@ -508,7 +508,7 @@ class ContactPipeline:
         entry buffer (reported) when it is too small.  Returns h as the kernels see it."""
         import warnings
 
-        from .fields import BoxGridFields
+        from ..fields import BoxGridFields
         from .grid import count_cells, fill_entries
 
         m, bx = self.model, self.boxes
@@ -531,7 +531,7 @@ class ContactPipeline:
         """Grow the contact buffers mid-step, keeping the first ``keep`` contacts and the duals."""
         import warnings
 
-        from .fields import ContactFields
+        from ..fields import ContactFields
 
         old = self.con
         new_cap = max(2 * old.capacity, int(1.25 * needed))

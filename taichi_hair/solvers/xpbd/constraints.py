@@ -44,8 +44,8 @@ other (Gauss-Seidel across colors).  No atomics: reruns are bitwise identical.
 
 import taichi as ti
 
-from .frames import wrap_angle
-from .strains import material_frame, signed_angle
+from ...frames import wrap_angle
+from ...strains import material_frame, signed_angle
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4

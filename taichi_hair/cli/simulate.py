@@ -4,7 +4,7 @@
     taichi-hair simulate assets/scenes/head_turn.toml --out out/head_turn.usd
     taichi-hair simulate assets/scenes/hairball.toml --out out/hb --frames 96 --resume
 
-SCENE is a built-in name (``hang``, ``hairball``) or a TOML scene file (:mod:`taichi_hair.scene_file`).
+SCENE is a built-in name (``hang``, ``hairball``) or a TOML scene file (:mod:`taichi_hair.scene.file`).
 The output is chosen by the name given to ``--out``:
 
 - ``*.usd``, ``*.usda``, ``*.usdc``: one USD BasisCurves prim with time-sampled points (one time code
@@ -47,7 +47,7 @@ import time
 
 import numpy as np
 
-from .cli_common import CLIError, _add_common, _atomic_savez, _init_taichi
+from .common import CLIError, _add_common, _atomic_savez, _init_taichi
 
 SCENES = ("hang", "hairball")
 #: Defaults of the built-in scenes (a TOML scene's own values win unless a flag is given).
@@ -57,13 +57,13 @@ USD_EXTENSIONS = (".usd", ".usda", ".usdc")
 
 # --------------------------------------------------------------------------- scenes
 def _named_scene(args):
-    """The built-in scenes as :class:`~taichi_hair.scene_file.Scene` objects (their own builders)."""
+    """The built-in scenes as :class:`~taichi_hair.scene.file.Scene` objects (their own builders)."""
     if args.vertices_per_strand is not None:
         raise CLIError(f"--vertices-per-strand applies to TOML scenes with a generated groom, not {args.scene!r} "
                        "(use --length)")
-    from .config import ContactConfig, SolverADMMConfig
-    from .scene_file import BodyAnimation, Scene
-    from .scenes import HairballScene, HangScene, build_hairball, build_hang, hairball_rotation, nod_rotation
+    from ..config import ContactConfig, SolverADMMConfig
+    from ..scene.file import BodyAnimation, Scene
+    from ..scene.builtin import HairballScene, HangScene, build_hairball, build_hang, hairball_rotation, nod_rotation
 
     d = {k: (getattr(args, k) if getattr(args, k) is not None else v) for k, v in NAMED_DEFAULTS.items()}
     iterations = d["iterations"]
@@ -80,7 +80,7 @@ def _named_scene(args):
         contacts = ContactConfig(friction=hs.friction, projection_iterations=2, correction_iterations=10,
                                  continuous_detections=args.continuous or 0)
         cfg = SolverADMMConfig(iterations=iterations, mode="dynamic", contacts=contacts, **integ)
-        from .colliders import SphereCollider
+        from ..contact.colliders import SphereCollider
 
         colliders = [SphereCollider(radius=hs.ball_radius, friction=hs.friction, body=0)]
         body = BodyAnimation(function=hairball_rotation, description={"preset": "hairball"})
@@ -100,7 +100,7 @@ def _load_scene(args):
         raise CLIError(f"unknown scene {args.scene!r} (available: {', '.join(SCENES)}, or a .toml scene file)")
     if not os.path.isfile(args.scene):
         raise CLIError(f"{args.scene}: no such scene file")
-    from .scene_file import load_scene
+    from ..scene.file import load_scene
 
     over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
                 length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous,
@@ -127,7 +127,7 @@ def _output_layout(out: str) -> dict:
 
 
 def _frame_groom(model, positions, radius, fps, frames=None):
-    from .io.groom import Groom
+    from ..io.groom import Groom
 
     h = model.host
     off = np.r_[h["strand_vertex_start"], h["strand_vertex_start"][-1] + h["strand_vertex_count"][-1]]
@@ -177,7 +177,7 @@ def cmd_simulate(args) -> int:
         raise CLIError("--frames and --substeps must be >= 1 and --fps > 0")
     layout = _output_layout(out)
     if args.frame_format:
-        from .io import WRITERS, normalize_format
+        from ..io import WRITERS, normalize_format
 
         fmt = normalize_format(args.frame_format)
         if fmt not in WRITERS:
@@ -185,7 +185,7 @@ def cmd_simulate(args) -> int:
         if layout["kind"] != "folder":
             raise CLIError("--frame-format applies to a folder output")
     if layout["kind"] == "usd":
-        from .io.usd import _pxr
+        from ..io.usd import _pxr
 
         try:
             _pxr()
@@ -194,7 +194,7 @@ def cmd_simulate(args) -> int:
     ti, arch = _init_taichi(args.arch, args.precision)
     import resource
 
-    from . import SimulationDivergedError
+    from .. import SimulationDivergedError
 
     # Refuse a checkpoint made for another scene before anything is built or compiled.
     fingerprint = {"scene": scene.description, "arch": arch, "precision": args.precision,
@@ -208,7 +208,7 @@ def cmd_simulate(args) -> int:
             raise CLIError(f"--resume needs the admm solver (this scene uses {scene.solver!r}, which has no "
                            "checkpoints)")
         if os.path.exists(layout["checkpoint"]):
-            from .checkpoint import fingerprint_difference, read_checkpoint
+            from ..checkpoint import fingerprint_difference, read_checkpoint
 
             ckpt = read_checkpoint(layout["checkpoint"])
             diff = fingerprint_difference(ckpt["fingerprint"], fingerprint)
@@ -274,7 +274,7 @@ def cmd_simulate(args) -> int:
     def write_frame_file(f):
         if layout["kind"] != "folder":
             return
-        from .io import save_groom
+        from ..io import save_groom
 
         save_groom(_frame_groom(model, frames[f], radius, scene.fps),
                    os.path.join(layout["frame_dir"], f"frame_{f:05d}{frame_ext}"),
@@ -292,7 +292,7 @@ def cmd_simulate(args) -> int:
         header += f" {'inside':>7} {'max depth mm':>12}"
     if with_contacts:
         header += f" {'contacts':>9} {'stick':>7} {'slide':>7} {'max pen. um':>11}"
-    from .progress import Progress
+    from ..progress import Progress
 
     bar = Progress(scene.frames, initial=start, label="frames", enabled=not args.quiet)
     if not args.quiet:
@@ -307,7 +307,7 @@ def cmd_simulate(args) -> int:
         print(header)
 
     def checkpoint(f):
-        from .checkpoint import write_checkpoint
+        from ..checkpoint import write_checkpoint
 
         write_checkpoint(layout["checkpoint"], state.to_numpy(), solver.checkpoint(), f, frames[:f + 1],
                          stats_rows, fingerprint)
@@ -319,7 +319,7 @@ def cmd_simulate(args) -> int:
         t0 = time.perf_counter()
         try:
             if args.equilibrium:
-                from .equilibrium import equilibrium
+                from ..solvers.equilibrium import equilibrium
 
                 eq = equilibrium(solver, state, control, args.equilibrium_tolerance, args.max_steps, dt,
                                  callback=lambda k, d: bar.update(0, step=k, displacement=f"{d:.2e}"))
@@ -371,7 +371,7 @@ def cmd_simulate(args) -> int:
                       sphere_radius=np.float64(scene.description.get("params", {}).get(
                           "sphere_radius", scene.description.get("params", {}).get("ball_radius", 0.0))))
     else:
-        from .io import save_groom
+        from ..io import save_groom
 
         written = layout["file"]
         save_groom(_frame_groom(model, None, radius, scene.fps, frames[:completed + 1]), written,
@@ -451,7 +451,7 @@ def cmd_simulate(args) -> int:
 # --------------------------------------------------------------------------- quality (taichi_hair.quality)
 def _frame_quality(model, scene, control, x, v, contact_stats) -> dict:
     """This frame's figures of :func:`taichi_hair.quality.frame_quality`, as stats.csv columns."""
-    from .quality import frame_quality
+    from ..quality import frame_quality
 
     rot = control.body_rotation.to_numpy() if scene.colliders else None
     tr = control.body_translation.to_numpy() if scene.colliders else None
@@ -462,7 +462,7 @@ def _frame_quality(model, scene, control, x, v, contact_stats) -> dict:
 
 def _run_quality(rows, eq) -> dict:
     """The run's quality for summary.json: the worst frame of each figure and the last frame's rest."""
-    from .quality import HAIR_KEYS, INSIDE_TOLERANCE_M, REST_SPEED_M_S, STRAIN_WARNING
+    from ..quality import HAIR_KEYS, INSIDE_TOLERANCE_M, REST_SPEED_M_S, STRAIN_WARNING
 
     rows = [r for r in rows if "strain_p99" in r]
     if not rows:
@@ -511,7 +511,7 @@ def _quality_lines(q) -> list:
 
 def _groom_size_note(scene, model) -> str:
     """Whether the groom's size looked wrong (a run that diverged at once)."""
-    from .io import Groom, describe_groom_size
+    from ..io import Groom, describe_groom_size
 
     h = model.host
     off = np.r_[h["strand_vertex_start"], h["strand_vertex_start"][-1] + h["strand_vertex_count"][-1]]
@@ -548,7 +548,7 @@ def _check_model_options(args, scene) -> None:
             raise CLIError(f"--max-steps must be >= 1, got {args.max_steps}")
         from dataclasses import replace
 
-        # w0 = 1: the paper's 25 converges far more slowly in the quasistatic mode (equilibrium.py).
+        # w0 = 1: the paper's 25 converges far more slowly in the quasistatic mode (solvers/equilibrium.py).
         scene.solver_config = replace(scene.solver_config, mode="quasistatic", w0=1.0)
         scene.frames = 1
         scene.description = dict(scene.description, equilibrium=args.equilibrium_tolerance)
@@ -559,8 +559,8 @@ def _apply_method_choice(args, scene, model):
     substeps); ``None`` without those options."""
     if args.max_error is None and args.budget_ms is None:
         return None
-    from .bench.pareto import load_shipped, read_csv
-    from .bench.choice import choose_for_scene, solver_config_for
+    from ..bench.pareto import load_shipped, read_csv
+    from ..bench.choice import choose_for_scene, solver_config_for
 
     try:
         points = read_csv(args.pareto_data) if args.pareto_data else load_shipped()

@@ -93,12 +93,12 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import xpbd_constraints as xc
-from .admm import find_non_finite
-from .errors import SimulationDivergedError
-from .frames import update_reference_frames
-from .model import Model, _np_float
-from .state import Control, State
+from . import constraints as xc
+from ...admm import find_non_finite
+from ...errors import SimulationDivergedError
+from ...frames import update_reference_frames
+from ...model import Model, _np_float
+from ...state import Control, State
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .builder import GroomBuilder
-from .config import RodMaterial
+from ..builder import GroomBuilder
+from ..config import RodMaterial
 
 
 @dataclass

@@ -26,7 +26,7 @@ its box overlaps, so a query visits ~1-8 cells and no neighbourhood.
 import numpy as np
 import taichi as ti
 
-from .fields import vec9
+from ..fields import vec9
 
 vec3 = ti.math.vec3
 ivec3 = ti.types.vector(3, ti.i32)

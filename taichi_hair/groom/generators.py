@@ -1,6 +1,6 @@
 """Procedural grooms on a head mesh or a sphere: straight, wavy and curly hair.
 
-    from taichi_hair.generators import GeneratorConfig, generate_groom, load_head, sphere_surface
+    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head, sphere_surface
     head = load_head()                                   # assets/head.obj and its scalp group
     groom = generate_groom(head, GeneratorConfig(style="wavy", strands=500, seed=1))
 
@@ -35,7 +35,7 @@ radius (1 + radius_spread)].  The strand count is ``strands``, or
 ``round(density * scalp area)`` when ``density`` is set.
 
 The signed distance used in steps 2 and 3 is analytic for a sphere and, for a
-mesh, a voxel SDF (``mesh2sdf``, the same as :class:`~taichi_hair.colliders.MeshCollider`)
+mesh, a voxel SDF (``mesh2sdf``, the same as :class:`~taichi_hair.contact.colliders.MeshCollider`)
 sampled trilinearly; its gradient is the central difference of that sampler.
 The voxel SDF is approximate (trilinear, 64 voxels across the padded head
 by default: 6.5 mm voxels); the tests check every generated vertex against
@@ -126,7 +126,7 @@ def _voxel_sdf(vertices, faces, resolution: int, name: str):
     grid = np.asarray(mesh2sdf.compute((vertices - center) / half, faces, n, fix=False, level=2.0 / n),
                       np.float64) * half
     origin = center - half
-    h = 2.0 * half / n  # grid point i sits at origin + i h (mesh2sdf's convention, see colliders.py)
+    h = 2.0 * half / n  # grid point i sits at origin + i h (mesh2sdf's convention, see contact/colliders.py)
 
     def sdf(p):
         p = np.asarray(p, np.float64)
@@ -365,7 +365,7 @@ def generate_groom(surface: ScalpSurface, config: GeneratorConfig | None = None)
     The Groom is in metres (float64 points), with per-strand ``radius`` and the
     configuration in ``params["generator"]``.
     """
-    from .io.groom import Groom
+    from ..io.groom import Groom
 
     cfg = config or GeneratorConfig()
     rng = np.random.default_rng(cfg.seed)

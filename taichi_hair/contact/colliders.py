@@ -13,7 +13,7 @@ gradient of the trilinear interpolant as normal.  The paper bisects SDFs for a
 contact point; we take the vertex position minus the signed distance along the
 normal, which is the same point to first order (a simplification).  A mesh that
 is not watertight (a scanned bust open at the neck, a head with holes) is signed by
-its generalized winding number (Jacobson et al. 2013, :mod:`taichi_hair.mesh_query`)
+its generalized winding number (Jacobson et al. 2013, :mod:`taichi_hair.contact.mesh_query`)
 at the SDF nodes, with a one-line warning naming the file and its holes: on the
 assets/head.obj with a 3 cm hole cut in the cheek mesh2sdf's own sign was wrong at
 1014 of 254072 nodes, the winding number at none (a repair with
@@ -243,7 +243,7 @@ class MeshCollider:
 
     @property
     def triangle_query(self):
-        """:class:`~taichi_hair.mesh_query.TriangleMeshQuery` of the mesh (body frame), built on first use."""
+        """:class:`~taichi_hair.contact.mesh_query.TriangleMeshQuery` of the mesh (body frame), built on first use."""
         if self._query is None:
             from .mesh_query import TriangleMeshQuery
 

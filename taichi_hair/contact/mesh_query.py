@@ -5,7 +5,7 @@
     w = q.winding_number(points)                # (N,) [-]: 1 inside a closed surface, 0 outside
     s = q.signed_distance(points)               # (N,) [m]: -d where w >= 1/2, +d elsewhere
 
-Used by :class:`~taichi_hair.colliders.MeshCollider` to sign the voxel SDF of a mesh that is not
+Used by :class:`~taichi_hair.contact.colliders.MeshCollider` to sign the voxel SDF of a mesh that is not
 watertight, and by :mod:`taichi_hair.quality` to measure penetration against the true surface.
 
 Inside/outside is the generalized winding number (Jacobson, Kavan and Sorkine-Hornung 2013, Eq. 2-3):

@@ -1,7 +1,7 @@
 """Procedural edits (Daviet 2023, Sec. 5.3): variants of one base groom from sequences of basic actions.
 
 Each variant is a seeded random sequence of ``VariantConfig.actions`` basic actions, applied inside one
-running quasistatic :class:`~taichi_hair.grooming.GroomingSession` (``frames`` frames after each action):
+running quasistatic :class:`~taichi_hair.groom.session.GroomingSession` (``frames`` frames after each action):
 
 * ``force``: an animated external force -- a region is selected and dragged toward a target that moves
   linearly from 0 to a random offset over ``frames`` frames; the dragged vertices are then pinned where
@@ -146,12 +146,12 @@ def make_variants(groom, config: VariantConfig, grooming_config=None, out_dir=".
     Returns:
         dict with ``variants`` (per variant: files, actions, seconds), ``contact_sheet``, ``seconds``.
     """
-    from .grooming import GroomingSession
-    from .render import CameraConfig, ViewerGGUI, save_png, strand_colors
+    from ..groom.session import GroomingSession
+    from ..render import CameraConfig, ViewerGGUI, save_png, strand_colors
 
     from dataclasses import replace
 
-    from .grooming import GroomingConfig
+    from ..groom.session import GroomingConfig
 
     t_start = time.perf_counter()
     os.makedirs(out_dir, exist_ok=True)
@@ -189,7 +189,7 @@ def make_variants(groom, config: VariantConfig, grooming_config=None, out_dir=".
 
 def _run_variants(session, config: VariantConfig, out_dir, thumb, log):
     """The variants' loop of :func:`make_variants`: returns (thumbnails, base first; per-variant records)."""
-    from .render import save_png
+    from ..render import save_png
 
     images = [thumb(session.groom)]
     variants = []

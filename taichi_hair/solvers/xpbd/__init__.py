@@ -1,0 +1,1 @@
+"""SolverXPBD: :mod:`.solver` (the step), :mod:`.constraints` (its Taichi kernels, quaternions)."""
