@@ -2,7 +2,7 @@
 
 Per step (Sec. 4.2):
 
-1. collision detection                       -- ``contacts.ContactPipeline.detect`` (contact/grid.py, contact/pipeline.py; Sec. 4.5)
+1. collision detection                       -- ``ContactPipeline.detect`` (contact/grid.py, contact/pipeline.py; Sec. 4.5)
 2. advect the initial guess x <- x_pred      -- ``admm.begin_step`` (x^t + dt v^t; BDF2 below)
 3. update DER frames                         -- ``frames.update_reference_frames``
 4. for each ADMM iteration:
@@ -80,7 +80,8 @@ from .tridiag import TridiagonalSolver
 #: Profiled stages.  The stage schedule fills local/global/frames/twist; the strand
 #: schedule records its fused ADMM loop under "iterations" (and the frame update
 #: before the loop under "frames").
-STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "iterations", "correction", "end")
+STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "iterations",
+          "correction", "end")
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 #: Solver buffers that hold the BDF2 history between steps (saved by ``SolverADMM.checkpoint``).

@@ -259,7 +259,8 @@ class TridiagonalSolver:
             thomas_solve(self.strand_vertex_start, self.strand_vertex_count, lower, diag, upper, rhs)
         elif self.use_shared:
             ncomp = rhs.n if hasattr(rhs, "n") else 1
-            pcr_solve_shared(ti.lang.impl.get_runtime().default_fp, self.block_size, self.n_levels, ncomp, self.block_vertex_start, self.block_vertex_count,
+            pcr_solve_shared(ti.lang.impl.get_runtime().default_fp, self.block_size, self.n_levels, ncomp,
+                             self.block_vertex_start, self.block_vertex_count,
                              self.vertex_strand, self.strand_vertex_start, self.strand_vertex_count,
                              lower, diag, upper, rhs)
         else:

@@ -19,9 +19,12 @@ def _builder_with_one_good_strand():
 @pytest.mark.parametrize(
     "points, message",
     [
-        (np.array([[0, 0, 0], [0.01, np.nan, 0], [0.02, 0, 0]]), r"strand 1: field 'points' has a non-finite coordinate at vertex 1"),
-        (np.array([[0, 0, 0], [0.01, 0, 0], [0.02, np.inf, 0]]), r"strand 1: field 'points' has a non-finite coordinate at vertex 2"),
-        (np.array([[0, 0, 0], [0.01, 0, 0], [0.01, 0, 0], [0.02, 0, 0]]), r"strand 1: field 'points' has a zero-length edge between vertices 1 and 2"),
+        (np.array([[0, 0, 0], [0.01, np.nan, 0], [0.02, 0, 0]]),
+         r"strand 1: field 'points' has a non-finite coordinate at vertex 1"),
+        (np.array([[0, 0, 0], [0.01, 0, 0], [0.02, np.inf, 0]]),
+         r"strand 1: field 'points' has a non-finite coordinate at vertex 2"),
+        (np.array([[0, 0, 0], [0.01, 0, 0], [0.01, 0, 0], [0.02, 0, 0]]),
+         r"strand 1: field 'points' has a zero-length edge between vertices 1 and 2"),
         (np.array([[0, 0, 0], [0.01, 0, 0]]), r"strand 1: field 'points' has 2 vertices; a strand needs at least 3"),
         (np.array([[0, 0, 0]]), r"strand 1: field 'points' has 1 vertices"),
         (np.zeros((4, 2)), r"strand 1: field 'points' must have shape \(m, 3\)"),

@@ -7,7 +7,6 @@ the layout update the Model in place instead).
 """
 
 import json
-import math
 import os
 from dataclasses import replace
 

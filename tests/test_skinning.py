@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-import taichi as ti
 
 from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
 from taichi_hair.scene.builtin import _fibonacci_lower_cap, strand_along

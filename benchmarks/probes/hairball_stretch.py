@@ -47,5 +47,5 @@ for f in range(1, frames+1):
         s = np.abs(e[real]/rl[real]-1)
         if f >= 8 and f <= 10:
             cs = solver.contact_stats if solver.contacts is not None else {}
-            j = int(np.argmax(s)); 
+            j = int(np.argmax(s))
             print(f, k, f"stretch {100*s.max():.2f}% (edge {j}, local {model.host['vertex_local_index'][np.where(real)[0][j]]})", cs.get("contacts"), f"pen {1e6*cs.get('max_penetration_m',0):.1f}um", flush=True)

@@ -2,7 +2,8 @@
 per step at a few step counts, and how far the state still moves between steps 300/1000 and 3000.
 A diagnostic behind the choice of w0 = 1 for ``simulate --equilibrium``:
 ``python3 benchmarks/probes/quasistatic_w0.py``."""
-import os, sys, time
+import os
+import sys
 
 import numpy as np
 import taichi as ti

@@ -1,7 +1,9 @@
 """Twist unknowns dropped vs solved (fidelity.py): 8 straight round strands, 300 quasistatic steps and 96
 dynamic steps of a nodding head, strand and stage schedules; prints the largest position difference and
 the wall times (compilation included).  A diagnostic: ``python3 benchmarks/probes/twist_free_vs_solved.py``."""
-import os, sys, time
+import os
+import sys
+import time
 
 import numpy as np
 import taichi as ti

@@ -6,7 +6,8 @@ equilibrium is below a tolerance.  The constraint weight scale is w0 = 1 there (
 and the stick-slip validation's): measured on 20 hanging curly strands of the ``hang`` scene
 (``python3 benchmarks/probes/quasistatic_w0.py``, steps of 10 iterations), w0 = 1 moves less than
 0.1 um per step by step 300, w0 = 5 by step 1,000, and the paper's w0 = 25 still moved 15 mm between
-steps 1,000 and 3,000 (ADMM's fixed point does not depend on w0; its speed does).  Same equilibrium as a long damped dynamic run, within the tolerance of the tests.
+steps 1,000 and 3,000 (ADMM's fixed point does not depend on w0; its speed does).
+Same equilibrium as a long damped dynamic run, within the tolerance of the tests.
 """
 
 from __future__ import annotations

@@ -58,7 +58,6 @@ without.)
 from __future__ import annotations
 
 import csv
-import math
 import os
 import time
 from dataclasses import dataclass, field
