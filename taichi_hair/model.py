@@ -100,6 +100,28 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
         """List of (start, count) per strand."""
         return list(zip(self.host["strand_vertex_start"].tolist(), self.host["strand_vertex_count"].tolist()))
 
+    def pair_voronoi_length(self, rescaling: bool) -> np.ndarray:
+        """Bending Voronoi length of every pair [m] (host, float64), shape (vertex_count,), 1 where inactive.
+
+        Pair i (vertices i-1, i, i+1) owns half of each of its two edges; with ``rescaling`` (Daviet 2023
+        Sec. 5.1, ``voronoi_rescaling`` of the solver configs) the second and penultimate vertices of a strand
+        own the whole boundary edge instead of half of it.  The one definition both SolverADMM and SolverXPBD
+        use.
+        """
+        h = self.host
+        n = self.vertex_count
+        le = h["edge_rest_length"]
+        local = h["vertex_local_index"]
+        count = h["strand_vertex_count"][h["vertex_strand"]]
+        prev = np.zeros(n)
+        prev[1:] = le[:-1]
+        wprev = np.full(n, 0.5)
+        wnext = np.full(n, 0.5)
+        if rescaling:
+            wprev[local == 1] = 1.0
+            wnext[local == count - 2] = 1.0
+        return np.where(h["pair_is_active"].astype(bool), wprev * prev + wnext * le, 1.0)
+
 
 def _np_float():
     return np.float64 if ti.lang.impl.current_cfg().default_fp == ti.f64 else np.float32
@@ -110,3 +132,4 @@ def _np_dtype(field):
     if dt in (ti.i32,):
         return np.int32
     return _np_float()
+

@@ -64,11 +64,10 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from .profiling import StageTimer
+from .solver_base import SolverBase
 from . import admm
 from .config import SolverADMMConfig
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, solve_local_elasticity
-from .errors import SimulationDivergedError
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
@@ -83,13 +82,13 @@ from .tridiag import TridiagonalSolver
 STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "iterations",
           "correction", "end")
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
-_FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
+_FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")  # finite-check order
 #: Solver buffers that hold the BDF2 history between steps (saved by ``SolverADMM.checkpoint``).
 _HISTORY_FIELDS = ("vertex_position_begin", "vertex_velocity_begin", "edge_twist_begin",
                    "edge_angular_velocity_begin", "pair_kappa_previous", "edge_strain_previous")
 
 
-class SolverADMM(StageTimer):
+class SolverADMM(SolverBase):
     """ADMM local-global integrator for Discrete Elastic Rods (Daviet 2023).
 
     Args:
@@ -99,9 +98,12 @@ class SolverADMM(StageTimer):
             times in ``stage_seconds`` (slower; for benchmarks).
     """
 
+    FIELD_NAMES = _FIELD_NAMES
+    STAGES = STAGES
+
     def __init__(self, model: Model, config: SolverADMMConfig | None = None, profile: bool = False,
                  colliders=None):
-        self.model = model
+        self._init_base(model, profile)
         self.config = config or SolverADMMConfig()
         cfg = self.config
         h = model.host
@@ -146,19 +148,13 @@ class SolverADMM(StageTimer):
         #: Contacts (Sec. 4.5): hair-hair when config.contacts is set, bodies when colliders are given.
         self.contacts = None
         if cfg.contacts is not None or colliders:
-            from .contact.colliders import ColliderSet
             from .config import ContactConfig
             from .contact.pipeline import ContactPipeline
 
             ccfg = cfg.contacts if cfg.contacts is not None else ContactConfig(hair_hair=False)
-            if colliders is not None and not isinstance(colliders, ColliderSet):
-                colliders = ColliderSet(colliders, model.body_count)
-            self.contacts = ContactPipeline(model, ccfg, colliders)
+            self.contacts = ContactPipeline(model, ccfg, self._collider_set(colliders))
         #: Statistics of the last step's contacts (see ``ContactPipeline.statistics``).
         self.contact_stats = {}
-        self.profile = profile
-        self.stage_seconds = {k: 0.0 for k in STAGES}
-        self.step_count = 0
         self.iteration_count = 0
         #: dt [s] of the last completed dynamic step when the BDF2 history (the begin buffers and
         #: ``pair_kappa_previous``) is that step's; None when the next step has no history.
@@ -168,23 +164,10 @@ class SolverADMM(StageTimer):
     def _set_coefficients(self) -> None:
         """Discretisation-dependent coefficients (bending Voronoi lengths, W_y, halved stretch, rest strains)."""
         m, cfg, h = self.model, self.config, self.model.host
-        n = m.vertex_count
-        le = h["edge_rest_length"]
         local = h["vertex_local_index"]
         count_of_vertex = h["strand_vertex_count"][h["vertex_strand"]]
         active = h["pair_is_active"].astype(bool)
-        # Bending Voronoi length of pair i: halves of both edges, or the full boundary
-        # edge for the second and penultimate vertices when rescaling (Sec. 5.1).
-        prev = np.zeros(n)
-        nxt = np.zeros(n)
-        prev[1:] = le[:-1]
-        nxt[:] = le
-        wprev = np.full(n, 0.5)
-        wnext = np.full(n, 0.5)
-        if cfg.voronoi_rescaling:
-            wprev[local == 1] = 1.0
-            wnext[local == count_of_vertex - 2] = 1.0
-        vstar = np.where(active, wprev * prev + wnext * nxt, 1.0)
+        vstar = m.pair_voronoi_length(cfg.voronoi_rescaling)
         bend = np.where(active[:, None], h["pair_bending_modulus"] / vstar[:, None], 0.0)
         weight = np.where(active, cfg.w0 * h["pair_bending_rigidity"] / vstar**3, 0.0)
         # Edge j belongs to pairs j and j+1 when 1 <= local j <= m-3: halve its stretch there.
@@ -221,7 +204,7 @@ class SolverADMM(StageTimer):
 
     def refresh_model(self) -> None:
         """Recompute everything derived from the Model after :meth:`Model.update` (no new fields)."""
-        self._set_coefficients()
+        super().refresh_model()
         if self.contacts is not None:
             self.contacts.set_coefficients()
 
@@ -239,8 +222,7 @@ class SolverADMM(StageTimer):
             SimulationDivergedError: if any value becomes non-finite; ``state`` is then
                 restored to the beginning of the step.
         """
-        if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-            raise ValueError(f"SolverADMM.step: dt must be a finite positive number, got {dt!r}")
+        self._check_dt(dt)
         m, b, cfg = self.model, self.buf, self.config
         dyn = self.dynamic
         bdf2_run = dyn and cfg.integrator == "bdf2"
@@ -405,15 +387,14 @@ class SolverADMM(StageTimer):
             rep["continuous_detection"] = "off (proximity detection only)"
         return rep
 
-    def check_finite(self, state: State) -> None:
-        """Raise SimulationDivergedError (after restoring the begin-of-step state) on NaN/inf."""
+    def _non_finite_code(self, state: State) -> int:
         admm.find_non_finite(self.model, state, state, self._bad)
-        code = int(self._bad[None])
-        if code >= 0:
-            admm.restore_begin(state, state, self.buf)
-            update_reference_frames(True, self.model, self.model, self.model, self.model, self.model._rest_rotation,
-                                    state.vertex_position, state.edge_twist, state)
-            raise SimulationDivergedError(code // 4, _FIELD_NAMES[code % 4], self.step_count)
+        return int(self._bad[None])
+
+    def _restore_begin(self, state: State) -> None:
+        admm.restore_begin(state, state, self.buf)
+        update_reference_frames(True, self.model, self.model, self.model, self.model, self.model._rest_rotation,
+                                state.vertex_position, state.edge_twist, state)
 
     def reset_duals(self) -> None:
         """Forget what the solver carries from step to step for the state it stepped: the warm-started

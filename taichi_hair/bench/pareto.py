@@ -208,23 +208,24 @@ def f64_specs(full: bool = False) -> list[RunSpec]:
 
 
 def _make_solver(spec: RunSpec, model, scene: Scene):
+    from ..solvers import make_solver
+
     rho_a = HAIR["density"] * math.pi * HAIR["radius"] ** 2
     if spec.family == "admm":
-        from ..solver_admm import SolverADMM
-
-        return SolverADMM(model, admm_config(spec.method, iterations=spec.iterations,
-                                             air_viscosity=scene.drag_rate * rho_a, check_finite=False))
+        return make_solver("admm", model, admm_config(spec.method, iterations=spec.iterations,
+                                                      air_viscosity=scene.drag_rate * rho_a, check_finite=False))
     if spec.method == "shape":
-        from ..solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
+        from ..solvers.shape.solver import ShapeRegion, SolverShapeConfig
 
         region = ShapeRegion(local_iterations=spec.iterations, length_iterations=spec.iterations,
                              damping=1.0 - math.exp(-scene.drag_rate * spec.dt))
-        return SolverShape(model, SolverShapeConfig(method=spec.shape_method, regions=(region,), air_drag=0.0,
-                                                    check_finite=False))
+        return make_solver("shape", model, SolverShapeConfig(method=spec.shape_method, regions=(region,),
+                                                             air_drag=0.0, check_finite=False))
     if spec.method == "xpbd":
-        from ..solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
+        from ..solvers.xpbd.solver import SolverXPBDConfig
 
-        return SolverXPBD(model, SolverXPBDConfig(substeps=spec.substeps, damping=scene.drag_rate, check_finite=False))
+        return make_solver("xpbd", model, SolverXPBDConfig(substeps=spec.substeps, damping=scene.drag_rate,
+                                                           check_finite=False))
     raise ValueError(f"unknown method {spec.method!r}")
 
 

@@ -250,22 +250,22 @@ class StrandMonitor:
 def make_solver(method: str, model, drag_rate: float, knob: int, dt: float):
     """A solver of ``method`` with the atlas's damping; its knob set by :func:`set_knob`."""
     rho_a = HAIR["density"] * math.pi * HAIR["radius"] ** 2
-    if is_admm(method):
-        from ..solver_admm import SolverADMM
+    from ..solvers import make_solver
 
-        return SolverADMM(model, admm_config(method, iterations=knob, air_viscosity=drag_rate * rho_a,
-                                             check_finite=False))
+    if is_admm(method):
+        return make_solver("admm", model, admm_config(method, iterations=knob, air_viscosity=drag_rate * rho_a,
+                                                      check_finite=False))
     if method == "shape":
-        from ..solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
+        from ..solvers.shape.solver import ShapeRegion, SolverShapeConfig
 
         region = ShapeRegion(local_iterations=knob, length_iterations=knob,
                              damping=1.0 - math.exp(-drag_rate * dt))
-        return SolverShape(model, SolverShapeConfig(regions=(region,), air_drag=0.0, check_finite=False))
+        return make_solver("shape", model, SolverShapeConfig(regions=(region,), air_drag=0.0, check_finite=False))
     if method == "xpbd":
-        from ..solvers.xpbd.solver import SolverXPBD, SolverXPBDConfig
+        from ..solvers.xpbd.solver import SolverXPBDConfig
 
-        return SolverXPBD(model, SolverXPBDConfig(substeps=knob, iterations=1, damping=drag_rate,
-                                                  check_finite=False))
+        return make_solver("xpbd", model, SolverXPBDConfig(substeps=knob, iterations=1, damping=drag_rate,
+                                                           check_finite=False))
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 

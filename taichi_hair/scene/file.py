@@ -399,17 +399,9 @@ class Scene:
 
     def make_solver(self, model, profile: bool = False):
         """The solver of the scene, with its colliders."""
-        if self.solver == "admm":
-            from ..solver_admm import SolverADMM
+        from ..solvers import make_solver
 
-            return SolverADMM(model, self.solver_config, profile=profile, colliders=self.colliders or None)
-        if self.solver == "shape":
-            from ..solvers.shape.solver import SolverShape
-
-            return SolverShape(model, self.solver_config, profile=profile, colliders=self.colliders or None)
-        from ..solvers.xpbd.solver import SolverXPBD
-
-        return SolverXPBD(model, self.solver_config)
+        return make_solver(self.solver, model, self.solver_config, colliders=self.colliders, profile=profile)
 
 
 def _resolve(base_dir: str, p: str) -> str:

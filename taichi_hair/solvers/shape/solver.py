@@ -135,9 +135,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import taichi as ti
 
-from ...profiling import StageTimer
+from ...solver_base import SolverBase
 from . import constraints as sc
-from ...errors import SimulationDivergedError
 from ...model import Model, _np_float
 from ...state import Control, State
 
@@ -272,7 +271,7 @@ class _BodyTransforms:
         self.body_translation = ti.Vector.field(3, float, body_count)
 
 
-class SolverShape(StageTimer):
+class SolverShape(SolverBase):
     """Position-based hair solver with global and local shape constraints (Han & Harada 2012).
 
     Args:
@@ -314,17 +313,18 @@ class SolverShape(StageTimer):
         colliders: the :class:`~taichi_hair.contact.colliders.ColliderSet` (its own fields), or None.
     """
 
+    FIELD_NAMES = _FIELD_NAMES
+    STAGES = STAGES
+
     def __init__(self, model: Model, config: SolverShapeConfig | None = None, strand_region=None,
                  profile: bool = False, colliders=None):
-        self.model = model
+        self._init_base(model, profile)
         self.config = config or SolverShapeConfig()
         cfg = self.config
         cfg.__post_init__()
-        h = model.host
         n, ns = model.vertex_count, model.strand_count
         self.region_count = len(cfg.regions)
         regions = self._check_strand_region(strand_region)
-        f = _np_float()
         quat = ti.types.vector(4, float)
         # Static rest data (Algorithm 2).
         self.vertex_rest_rotation = ti.field(quat, n)
@@ -360,9 +360,18 @@ class SolverShape(StageTimer):
         self._bad = ti.field(ti.i32, ())
 
         self.strand_region.from_numpy(regions)
+        self.set_colliders(colliders)
+        self._set_coefficients()
+        self.upload_regions()
+        self.vertex_rotation.copy_from(self.vertex_rest_rotation)
+        #: Method 2's latest global transforms ^wR_i (one of the two buffers) [-].
+        self.global_rotation = self.vertex_rotation
+
+    def _set_coefficients(self) -> None:
+        """What the solver derives from the Model: collision radii, rest arc fractions, rest transforms."""
+        model, h, n, f = self.model, self.model.host, self.model.vertex_count, _np_float()
         radius = np.array([mat.radius for mat in model.materials], np.float64)
         self.vertex_collision_radius.from_numpy(radius[h["vertex_strand"]].astype(f))
-        self.set_colliders(colliders)
         # Rest arc-length fraction of each vertex, for the S_G ramp.
         starts, counts = h["strand_vertex_start"], h["strand_vertex_count"]
         le = h["edge_rest_length"]
@@ -372,14 +381,7 @@ class SolverShape(StageTimer):
             arc[idx] = arc[idx - 1] + le[idx - 1]
         total = arc[starts + counts - 1]
         self.vertex_arc_fraction.from_numpy((arc / np.repeat(total, counts)).astype(f))
-        self.upload_regions()
         sc.initialize_rest_transforms(model, self)
-        self.vertex_rotation.copy_from(self.vertex_rest_rotation)
-        #: Method 2's latest global transforms ^wR_i (one of the two buffers) [-].
-        self.global_rotation = self.vertex_rotation
-        self.profile = profile
-        self.stage_seconds = {k: 0.0 for k in STAGES}
-        self.step_count = 0
 
     # ------------------------------------------------------------------ set-up
     def upload_regions(self) -> None:
@@ -430,17 +432,7 @@ class SolverShape(StageTimer):
         between steps, not inside one).  As for any new ``ColliderSet``, the first step after this one
         sees no body motion (its begin-of-step transforms are its end-of-step ones), which only matters
         to friction."""
-        from ...contact.colliders import ColliderSet
-
-        if colliders is None or (not isinstance(colliders, ColliderSet) and len(colliders) == 0):
-            self.colliders = None
-            return
-        if not isinstance(colliders, ColliderSet):
-            colliders = ColliderSet(colliders, self.model.body_count)
-        elif colliders.body_count != self.model.body_count:
-            raise ValueError(f"SolverShape: the ColliderSet has {colliders.body_count} bodies, the model "
-                             f"{self.model.body_count}")
-        self.colliders = colliders
+        self.colliders = self._collider_set(colliders)
 
     def reset_collider_motion(self) -> None:
         """Forget the bodies' last transforms: the next step sees no body motion (as the first step
@@ -466,8 +458,7 @@ class SolverShape(StageTimer):
             SimulationDivergedError: if a position or velocity becomes non-finite; ``state`` is then
                 restored to the beginning of the step.
         """
-        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"SolverShape.step: dt must be a finite positive number, got {dt!r}")
+        self._check_dt(dt)
         cfg, m = self.config, self.model
         cfg.__post_init__()
         k_sub = cfg.substeps
@@ -566,10 +557,9 @@ class SolverShape(StageTimer):
                 sc.apply_local_shape_constraints_batch(True, m, self, self.vertex_rest_rotation, 0, it, x)
                 sc.apply_local_shape_constraints_batch(True, m, self, self.vertex_rest_rotation, 1, it, x)
 
-    def check_finite(self, state: State) -> None:
-        """Raise SimulationDivergedError (after restoring the begin-of-step state) on NaN/inf."""
+    def _non_finite_code(self, state: State) -> int:
         sc.find_non_finite(self.model, state.vertex_position, state.vertex_velocity, self._bad)
-        code = int(self._bad[None])
-        if code >= 0:
-            sc.restore_begin(self, state.vertex_position, state.vertex_velocity)
-            raise SimulationDivergedError(code // 2, _FIELD_NAMES[code % 2], self.step_count)
+        return int(self._bad[None])
+
+    def _restore_begin(self, state: State) -> None:
+        sc.restore_begin(self, state.vertex_position, state.vertex_velocity)

@@ -95,7 +95,7 @@ import taichi as ti
 
 from . import constraints as xc
 from ...admm import find_non_finite
-from ...errors import SimulationDivergedError
+from ...solver_base import SolverBase
 from ...frames import update_reference_frames
 from ...model import Model, _np_float
 from ...state import Control, State
@@ -233,16 +233,26 @@ class XPBDBuffers:
         self.edge_reference_twist_begin = ti.field(float, n)
 
 
-class SolverXPBD:
+class SolverXPBD(SolverBase):
     """XPBD Cosserat-rod integrator (module docstring), same interface as :class:`SolverADMM`.
 
     Args:
         model: the :class:`Model` to simulate.
         config: :class:`SolverXPBDConfig`.
+        profile: if True, synchronise after each step and accumulate its wall time in
+            ``stage_seconds["substeps"]``.
+        colliders: must be None or empty: SolverXPBD has no collision handling (a baseline solver).
     """
 
-    def __init__(self, model: Model, config: SolverXPBDConfig | None = None):
-        self.model = model
+    FIELD_NAMES = _FIELD_NAMES
+    STAGES = ("substeps",)
+
+    def __init__(self, model: Model, config: SolverXPBDConfig | None = None, profile: bool = False,
+                 colliders=None):
+        self._init_base(model, profile)
+        if colliders is not None and len(colliders) > 0:
+            raise ValueError("SolverXPBD has no collision handling: colliders must be None (use SolverADMM or "
+                             "SolverShape for bodies)")
         self.config = config or SolverXPBDConfig()
         if not isinstance(self.config, SolverXPBDConfig):
             raise ValueError(f"SolverXPBD: config must be a SolverXPBDConfig, got {type(self.config).__name__}")
@@ -254,7 +264,6 @@ class SolverXPBD:
         self.buf = XPBDBuffers(model.vertex_count)
         self._bad = ti.field(ti.i32, ())
         self._set_coefficients()
-        self.step_count = 0
         #: Vertex-iterations done so far (vertex_count x substeps x iterations per step) [-].
         self.vertex_iteration_count = 0
 
@@ -265,7 +274,6 @@ class SolverXPBD:
         le = h["edge_rest_length"]
         local = h["vertex_local_index"]
         strand = h["vertex_strand"]
-        count = h["strand_vertex_count"][strand]
         clamped = h["strand_body"][strand] >= 0
         edge_ok = le > 0
         active = h["pair_is_active"].astype(bool)
@@ -282,15 +290,7 @@ class SolverXPBD:
             np.where(kinematic_edge, 0.0, 1.0 / (4.0 * np.where(edge_ok, inertia, 1.0))).astype(f))
         b.edge_compliance.from_numpy(
             np.where(edge_ok, 1.0 / np.where(edge_ok, h["edge_stretch_stiffness"], 1.0), 0.0).astype(f))
-        # Bending Voronoi lengths as in SolverADMM._set_coefficients (Sec. 5.1 rescaling).
-        prev = np.zeros(n)
-        prev[1:] = le[:-1]
-        wprev = np.full(n, 0.5)
-        wnext = np.full(n, 0.5)
-        if cfg.voronoi_rescaling:
-            wprev[local == 1] = 1.0
-            wnext[local == count - 2] = 1.0
-        vstar = np.where(active, wprev * prev + wnext * le, 1.0)
+        vstar = m.pair_voronoi_length(cfg.voronoi_rescaling)
         modulus = np.where(active[:, None], h["pair_bending_modulus"], 1.0)
         b.pair_compliance.from_numpy(np.where(active[:, None], vstar[:, None] / modulus, 0.0).astype(f))
         tau = h["strand_damping_time"][strand] if cfg.strain_rate_damping else np.zeros(n)
@@ -327,8 +327,8 @@ class SolverXPBD:
             SimulationDivergedError: if any value becomes non-finite; ``state`` is then
                 restored to the beginning of the step.
         """
-        if not (isinstance(dt, (int, float)) and not isinstance(dt, bool) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"SolverXPBD.step: dt must be a finite positive number, got {dt!r}")
+        self._check_dt(dt)
+        t0 = self._tick()
         m, b, cfg = self.model, self.buf, self.config
         n_sub = cfg.substeps
         dts = dt / n_sub
@@ -356,16 +356,16 @@ class SolverXPBD:
         xc.write_twists(m, state, b)
         self.step_count += 1
         self.vertex_iteration_count += m.vertex_count * n_sub * cfg.iterations
+        self._tock("substeps", t0)
         if cfg.check_finite:
             self.check_finite(state)
 
-    def check_finite(self, state: State) -> None:
-        """Raise SimulationDivergedError (after restoring the begin-of-step state) on NaN/inf."""
+    def _non_finite_code(self, state: State) -> int:
         find_non_finite(self.model, state, state, self._bad)
-        code = int(self._bad[None])
-        if code >= 0:
-            xc.restore_begin(state, state, self.buf)
-            raise SimulationDivergedError(code // 4, _FIELD_NAMES[code % 4], self.step_count)
+        return int(self._bad[None])
+
+    def _restore_begin(self, state: State) -> None:
+        xc.restore_begin(state, state, self.buf)
 
     # ------------------------------------------------------------------ diagnostics
     def edge_stretch(self, state: State) -> np.ndarray:
