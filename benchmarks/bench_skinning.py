@@ -132,7 +132,7 @@ def main(argv=None):
                               "max": float(ms.max())}
 
     # Split between the two kernels (synchronised after each).
-    from taichi_hair import skinning as skm
+    from taichi_hair.groom import skinning as skm
 
     frames_t, blend_t = [], []
     for f in range(1, args.frames + 1):

@@ -17,7 +17,7 @@ import pytest
 import taichi as ti
 
 from taichi_hair import GroomBuilder, SimulationDivergedError
-from taichi_hair import shape_constraints as sc
+from taichi_hair.solvers.shape import constraints as sc
 from taichi_hair.contact.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
 from taichi_hair.solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
 
