@@ -283,6 +283,18 @@ def test_choice_respects_what_the_scene_needs():
         choose_for_scene(pts, 100, 2000, 24.0, "f64", hair_hair=False, colliders=False, max_error=0.5)
 
 
+def test_choice_offers_bdf2_only_without_contacts_and_sets_the_integrator():
+    from taichi_hair.bench.choice import choose_for_scene, solver_config_for
+
+    pts = _points() + [_points()[0].__class__("groom", "admm_bdf2", "f32", 1 / 96, 10, 0, 0, "", 0.5, 0.03)]
+    c = choose_for_scene(pts, 100, 2000, 24.0, "f32", hair_hair=False, colliders=False, max_error=0.05)
+    cfg = solver_config_for(c)
+    assert c.point.method == "admm_bdf2" and cfg.integrator == "bdf2" and cfg.w0 == 1.0 and cfg.iterations == 10
+    # With contacts (body or hair-hair) BDF2 is not offered: the cheapest within 10 % is then admm_w1.
+    c = choose_for_scene(pts, 100, 2000, 24.0, "f32", hair_hair=False, colliders=True, max_error=0.1)
+    assert c.point.method == "admm_w1" and solver_config_for(c).integrator == "backward_euler"
+
+
 def _cli(*args, cwd):
     env = dict(os.environ, PYTHONPATH=ROOT)
     return subprocess.run([sys.executable, "-m", "taichi_hair.cli", *args], cwd=cwd, env=env,

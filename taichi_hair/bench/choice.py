@@ -6,7 +6,8 @@ The choice by error or budget (``simulate SCENE --max-error E`` / ``--budget-ms 
 ``pareto.csv``).  The measured scenes stand in for the user's: a scene with one strand is matched to
 ``swing`` (a strand released from horizontal), any other to ``groom`` (wavy strands under a head
 shake).  Only methods that can simulate the scene are considered: hair-hair contacts need SolverADMM;
-body colliders exclude SolverXPBD (it has none); the precision must be the run's.  The errors are
+body colliders exclude SolverXPBD (it has none); ADMM with BDF2 (``admm_bdf2``) is offered only to
+scenes without contacts, the only ones it was measured on; the precision must be the run's.  The errors are
 those measured on the stand-in scene, not guarantees for the user's scene, and the costs are those of
 the machine that measured them (the data's ``pareto_cpu.json``); the choice says so when it is made.
 """
@@ -35,12 +36,13 @@ def _stand_in(strand_count: int) -> str:
 
 def eligible_methods(hair_hair: bool, colliders: bool) -> tuple[str, ...]:
     """Methods of the Pareto data that can simulate a scene with these features."""
-    admm = ("admm", "admm_w1", "admm_bdf2", "admm_f64")
+    # BDF2 was measured without contacts only (the Pareto scenes have none): not offered with them.
+    admm = ("admm", "admm_w1", "admm_f64")
     if hair_hair:
         return admm
     if colliders:
         return admm + ("shape",)
-    return admm + ("shape", "xpbd")
+    return admm + ("admm_bdf2", "shape", "xpbd")
 
 
 def choose_for_scene(points, strand_count: int, vertex_count: int, fps: float, precision: str, hair_hair: bool,

@@ -32,8 +32,8 @@ by 0.12 % at 1/3840 s.
 
 Methods and knobs (default grid; ``--full`` adds more):
 
-* ``admm`` (w0 = 25, the paper's) and ``admm_w1`` (w0 = 1): dt in {1/96, 1/384} s x iterations
-  in {5, 10, 30};  ``admm_f64``: w0 = 1 in double precision (the precision knob), dt = 1/96 s,
+* ``admm`` (w0 = 25, the paper's), ``admm_w1`` (w0 = 1, the default) and ``admm_bdf2`` (w0 = 1,
+  BDF2): dt in {1/96, 1/384} s x iterations in {5, 10, 30};  ``admm_f64``: w0 = 1 in double precision (the precision knob), dt = 1/96 s,
   iterations in {10, 30}, run in the reference's process.
 * ``shape``: SolverShape Method 1, 2 and 3 (TressFX defaults for the shape stiffnesses) x
   local/length iterations in {2, 10} at dt = 1/96 s, and Method 2 with 10 iterations at 1/384 s.
@@ -49,25 +49,24 @@ The measured data are copied to ``taichi_hair/bench/data/pareto_cpu.csv`` (with 
 ``taichi-hair bench pareto --out DIR --update-data`` re-measures and replaces them.
 
 Findings, honestly (default grid, ``taichi-hair bench pareto --out benchmarks/results/pareto
---update-data``, 2026-11-25, 2-core VM shared with other sessions at load 3-6, so costs are
-pessimistic and noisy by up to ~2-3x; 621 s in all, 300 s of it the groom reference):
+--update-data``, 2026-12-02, issue 12's defaults, 2-core VM shared with other sessions at load 1-4, so costs
+are noisy by up to ~2x; 1,075 s in all, 320 s of it the groom reference; errors at 10 iterations):
 
-* ``cantilever`` (analytic error): ADMM owns the whole front, as the issue expects.  ADMM w0 = 1
-  reaches 1.9 % at dt = 1/96 s with 10 iterations and 0.17 % at 1/384 s; the paper's w0 = 25
-  needs 1/384 s and 30 iterations for 2.3 %.  SolverShape (no bending stiffness) and XPBD (80
-  substeps per 1/96 s step) stay at 60-80 % of L.
-* ``swing`` (trajectory error, reference self-difference 0.57 %): ADMM does NOT own the front
-  below ~10 %.  At dt = 1/96 s ADMM's error is ~9.5-9.7 % whatever the iterations (5-30) and the
-  precision: it is backward Euler's numerical damping of the swing, a time-step error, not an
-  iteration error.  XPBD with 80 substeps per 1/96 s step (dt_s = 1/7680 s) gets 2.7 % at a
-  quarter of the cost of ADMM at dt = 1/384 s (4.2-4.4 %).
-* ``groom`` (reference self-difference 2.9 %, so errors below ~3 % cannot be told apart): the
-  front is SolverShape at the cheap end (48 % error), then XPBD and ADMM w0 = 1 alternating:
-  ADMM 15.5 % (1/96 s, 5 iterations), XPBD 8.7 % (20 substeps), ADMM 8.3 % (1/384 s, 5
-  iterations), XPBD 7.0 % (80 substeps).  No method reached "a few percent" in the default
-  grid; ADMM is on the front but does not own it.
-* The precision knob: ADMM in f64 gives the same errors as f32 at the same knobs here (the f32
-  error is not the limit).
+* ``cantilever`` (analytic error): ADMM with w0 = 1 owns the front: 1.9 % at dt = 1/96 s, 0.17 % at
+  1/384 s; BDF2 2.4 % at 1/96 s; the paper's w0 = 25 52 % at 1/96 s (it has not settled in 1.5 s), 2.3 %
+  at 1/384 s with 30 iterations.  SolverShape and XPBD stay at 60-80 % of L (no bending stiffness /
+  too few substeps).
+* ``swing`` (reference self-difference 0.57 %): BDF2 owns the front: 3.1 % at dt = 1/96 s, 0.57 % at
+  1/384 s with 30 iterations, against backward Euler's 9.7 % and 4.2 % (w0 = 1; its numerical damping of
+  the swing, a time-step error that no iteration count removes) and XPBD's 2.7 % with 80 substeps per
+  1/96 s step at 4x BDF2's cost at 1/96 s.
+* ``groom`` (reference self-difference 3.5 %, so errors below ~4 % cannot be told apart): SolverShape at
+  the cheap end (68 %), ADMM w0 = 1 at 1/96 s with 5 iterations (16 %), then BDF2: 7.7 % at 1/96 s,
+  5.9 % at 1/384 s; backward Euler w0 = 1 16 % / 8.9 %, XPBD 7.9 % with 80 substeps.
+* The precision knob: ADMM in f64 gives the same errors as f32 at the same knobs (f32 is not the limit).
+* The default integrator stays backward Euler: BDF2 is unstable with 2 iterations and, on uneven edges,
+  with 10 iterations at dt = 1/96 s (:mod:`taichi_hair.bench.stability`); ``--max-error`` method choice
+  may pick it for scenes without contacts, where it was measured.
 
 Cost is per 1,000 vertices; the swing scene has 81 vertices, so its costs carry the per-step
 Python and launch overhead (about 10x the per-vertex cost of the groom).

@@ -1,7 +1,8 @@
 """Stability atlas (issue 4, item 5): where each method is stable, stable but wrong, or unstable.
 
 For each method (``admm``: :class:`SolverADMM` with the paper's constraint weight scale
-w0 = 25; ``admm_w1``: the same with w0 = 1; ``shape``: :class:`SolverShape` (TressFX),
+w0 = 25; ``admm_w1``: the same with w0 = 1 (the default); ``admm_bdf2``: w0 = 1 with BDF2
+(:mod:`taichi_hair.bench.methods`); ``shape``: :class:`SolverShape` (TressFX),
 ``xpbd``: :class:`SolverXPBD`) we run a grid of
 
 * time step dt per call to ``step`` (1/24 to 1/384 s by default);
@@ -52,18 +53,20 @@ sag errors after 3 s) nor the dual frame ("pair": same as "root") is the cause; 
 to ~1 % in the same 3 s (second study in the same file).
 
 Default atlas, measured (``taichi-hair bench stability --out benchmarks/results/stability``,
-2026-11-25, 2-core shared VM, f32 CPU, 116 s; cells ok / wrong / unstable out of 36 per method):
-``admm`` 5 / 31 / 0 (never unstable, but accurate only at dt = 1/384 s: the w0 = 25 oscillations
-above); ``admm_w1`` 12 / 13 / 11 (ok for the three hair rods from dt = 1/96 s with 50 iterations
-or dt = 1/384 s with 10; the E_s = 1000 E_b rod diverges in every cell, and 2 iterations at
-1/384 s gain energy on the long and edge-variance rods); ``shape`` 0 / 33 / 3 (no bending
-stiffness, so the sag is never the elastica's; 10-50 iterations at 1/384 s gained energy on the
-long and edge-variance rods); ``xpbd`` 1 / 31 / 4 (stretch of 8 % to 1000x below 50 substeps per
-1/384 s; ok only for the long rod at 50 substeps per 1/384 s; the edge-variance rod gains energy
-at 2-10 substeps).  So: ADMM is the only method that is never unstable at the paper's w0, but
-it needs small steps to be accurate; w0 = 1 converges faster on hair and breaks on a very stiff
-stretch, as Daviet 2023 Sec. 6.1 warns; the local methods fail first on the long chain and the
-uneven edges, as the papers say.
+2026-12-02, 2-core shared VM at load ~2, f32 CPU, 130 s; cells ok / wrong / unstable out of 36 per
+method; issue 12's defaults: the Woodbury local step, the inertia floor, SolverShape's substeps and
+follow-the-leader pass): ``admm`` (w0 = 25) 5 / 31 / 0 (never unstable, accurate only at dt = 1/384 s
+with 10-50 iterations); ``admm_w1`` (w0 = 1, the default) 18 / 16 / 2 (ok for every rod from dt = 1/96 s
+with 50 iterations and at 1/384 s with 10; unstable only with 2 iterations at 1/384 s on the long and
+edge-variance rods; before the Woodbury local step it was 12 / 13 / 11, every stiff-stretch cell
+non-finite); ``admm_bdf2`` (w0 = 1, BDF2) 14 / 14 / 8 (BDF2's extrapolated predictor amplifies an
+unconverged ADMM step: 2 iterations are unstable at 1/96 and 1/384 s, and 10 iterations at 1/96 s on
+the edge-variance rod; with 50 iterations every cell is ok); ``shape`` 3 / 24 / 9 (no bending
+stiffness, so the sag is not the elastica's; the follow-the-leader pass with Mueller's velocity
+correction gains energy on the long and edge-variance rods at dt = 1/384 s and at 2 iterations at
+1/24 s, up to 5.4 m g L: it was 0 / 33 / 3 before, when it stretched instead); ``xpbd`` 1 / 31 / 4.
+So: ADMM with w0 = 1 is the most often right; the paper's w0 = 25 is the only never unstable one;
+BDF2 needs converged steps; the local methods fail first on the long chain and the uneven edges.
 
 "Lost rest shape" is not a separate criterion here: the rods are straight, so a lost rest shape
 shows as a sag error.  SolverShape has no bending stiffness (its shape constraints are
