@@ -26,7 +26,6 @@ OVERSIZE = {
     "taichi_hair.scene.file": 772,
     "taichi_hair.solvers.shape.constraints": 747,
     "taichi_hair.groom.skinning": 674,
-    "taichi_hair.cli.simulate": 655,
     "taichi_hair.contact.pipeline": 645,
     "taichi_hair.bench.pareto": 615,
 }
