@@ -24,7 +24,7 @@ MAX_LINES = 600
 OVERSIZE = {
     "taichi_hair.groom.session": 1401,
     "taichi_hair.scene.file": 772,
-    "taichi_hair.solvers.shape.constraints": 747,
+    "taichi_hair.solvers.shape.constraints": 651,
     "taichi_hair.groom.skinning": 674,
     "taichi_hair.cli.simulate": 655,
     "taichi_hair.contact.pipeline": 645,
