@@ -14,7 +14,8 @@ import sys
 import numpy as np
 import pytest
 
-from taichi_hair.scene.file import SceneError, euler_to_matrix, load_scene, matrix_to_quat, quat_to_matrix, slerp
+from taichi_hair.rotation import euler_to_matrix, quat_from_matrix_np, quat_slerp_np, quat_to_matrix_np
+from taichi_hair.scene.file import SceneError, load_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "assets", "scenes")
@@ -117,9 +118,13 @@ def test_keyframes_slerp_smooth_linear_and_pivot(tmp_path):
     # of the angle (smoothstep(0.25) = 0.15625), and it is symmetric about the middle.
     _, (Rs, _) = s.body_transforms(0.25)
     assert math.isclose(math.degrees(math.acos(Rs[1, 1])), 180 * 0.15625, rel_tol=1e-9)
-    q = matrix_to_quat(euler_to_matrix((10, 20, 30)))
-    assert np.allclose(quat_to_matrix(q), euler_to_matrix((10, 20, 30)))
-    assert np.allclose(slerp([1, 0, 0, 0], q, 1.0), q)
+    # The file's quaternion is (w, x, y, z) (a turn about x above); the description (the checkpoint
+    # fingerprint) keeps that order, the Keyframe holds taichi_hair.rotation's (x, y, z, w).
+    assert s.bodies[1].description["keys"][1][1] == [0.0, 1.0, 0.0, 0.0]
+    assert np.array_equal(s.bodies[1].keys[1].rotation, [1.0, 0.0, 0.0, 0.0])
+    q = quat_from_matrix_np(euler_to_matrix((10, 20, 30)))
+    assert np.allclose(quat_to_matrix_np(q), euler_to_matrix((10, 20, 30)))
+    assert np.allclose(quat_slerp_np([0, 0, 0, 1], q, 1.0), q)
 
 
 def test_presets_head_turn_and_nod_reach_their_amplitude(tmp_path):

@@ -17,6 +17,7 @@ import pytest
 import taichi as ti
 
 from taichi_hair import GroomBuilder, SimulationDivergedError
+from taichi_hair import rotation as rot
 from taichi_hair.solvers.shape import constraints as sc
 from taichi_hair.contact.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
 from taichi_hair.solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
@@ -137,17 +138,17 @@ def scratch():
 @ti.kernel
 def _rotate_by_matrix_quaternion(f: ti.template()):
     for k in range(8):
-        q = sc.quat_from_matrix(f.mat[k])
-        f.out_a[k] = sc.quat_rotate(q, f.a[k])
-        f.out_b[k] = sc.quat_rotate_inverse(q, f.out_a[k])
+        q = rot.quat_from_matrix(f.mat[k])
+        f.out_a[k] = rot.quat_rotate(q, f.a[k])
+        f.out_b[k] = rot.quat_rotate_inverse(q, f.out_a[k])
 
 
 @ti.kernel
 def _between(f: ti.template()):
     for k in range(8):
-        q = sc.quat_between(f.a[k], f.b[k])
-        f.out_a[k] = sc.quat_rotate(q, f.a[k])
-        p = sc.quat_mul(q, sc.quat_conjugate(q))  # identity
+        q = rot.quat_between(f.a[k], f.b[k])
+        f.out_a[k] = rot.quat_rotate(q, f.a[k])
+        p = rot.quat_mul(q, rot.quat_conjugate(q))  # identity
         f.out_s[k] = ti.abs(p[3] - 1.0) + ti.abs(p[0]) + ti.abs(p[1]) + ti.abs(p[2])
 
 

@@ -4,9 +4,8 @@ Simulation with Efficient Hair Style Preservation").
 One stage per kernel, in the order of the paper's Algorithm 1; the math lives in
 ``ti.func``s that a test can call alone (wrap one in a tiny kernel):
 
-* rotations are unit quaternions stored as ``vec4`` (x, y, z, w), as in TressFX:
-  :func:`quat_mul`, :func:`quat_rotate`, :func:`quat_rotate_inverse`,
-  :func:`quat_between` (shortest arc), :func:`quat_from_matrix`;
+* rotations are unit quaternions stored as ``vec4`` (x, y, z, w), as in TressFX; their algebra is
+  :mod:`taichi_hair.rotation` (``quat_mul``, ``quat_rotate``, ``quat_between``, ``quat_slerp``, ...);
 * :func:`global_stiffness_at` -- the root-to-tip ramp of S_G (Sec. 3.3);
 * :func:`local_shape_correction` -- the two-vertex update of Eq. 4;
 * :func:`edge_length_correction` -- the PBD distance constraint [MHHR07];
@@ -28,109 +27,14 @@ position of vertex i is ``^{i-1}P_i^0 = R_{i-1}^{0 T} (P_i^0 - P_{i-1}^0)``.
 import taichi as ti
 
 from ...contact.colliders import acts_on, body_transform, collider_distance
+from ...rotation import (quat_between, quat_from_matrix, quat_identity, quat_mul, quat_rotate, quat_rotate_inverse,
+                         quat_slerp, quat_to_matrix)
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
 
 
-# =========================================================================== quaternion math
-@ti.func
-def quat_identity() -> vec4:
-    return vec4(0.0, 0.0, 0.0, 1.0)
-
-
-@ti.func
-def quat_mul(a: vec4, b: vec4) -> vec4:
-    """Hamilton product a * b (apply b first, then a)."""
-    av = vec3(a[0], a[1], a[2])
-    bv = vec3(b[0], b[1], b[2])
-    v = a[3] * bv + b[3] * av + av.cross(bv)
-    return vec4(v[0], v[1], v[2], a[3] * b[3] - av.dot(bv))
-
-
-@ti.func
-def quat_conjugate(q: vec4) -> vec4:
-    return vec4(-q[0], -q[1], -q[2], q[3])
-
-
-@ti.func
-def quat_rotate(q: vec4, v: vec3) -> vec3:
-    """R(q) v for a unit quaternion q."""
-    u = vec3(q[0], q[1], q[2])
-    t = 2.0 * u.cross(v)
-    return v + q[3] * t + u.cross(t)
-
-
-@ti.func
-def quat_rotate_inverse(q: vec4, v: vec3) -> vec3:
-    """R(q)^T v for a unit quaternion q."""
-    return quat_rotate(quat_conjugate(q), v)
-
-
-@ti.func
-def quat_between(a: vec3, b: vec3) -> vec4:
-    """Shortest-arc rotation taking unit vector a to unit vector b.
-
-    For b = -a (the arc is not unique) it turns by pi about an axis perpendicular to a.
-    """
-    d = a.dot(b)
-    q = quat_identity()
-    if d < -1.0 + 1e-6:
-        axis = a.cross(vec3(1.0, 0.0, 0.0))
-        if axis.norm_sqr() < 1e-6:
-            axis = a.cross(vec3(0.0, 1.0, 0.0))
-        axis = axis.normalized()
-        q = vec4(axis[0], axis[1], axis[2], 0.0)
-    else:
-        c = a.cross(b)
-        q = vec4(c[0], c[1], c[2], 1.0 + d).normalized()
-    return q
-
-
-@ti.func
-def quat_from_matrix(R) -> vec4:
-    """Unit quaternion of a 3x3 rotation matrix (Shepperd's method: divide by the largest term)."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    q = quat_identity()
-    if tr > 0.0:
-        s = ti.sqrt(tr + 1.0) * 2.0  # 4 w
-        q = vec4((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s)
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = ti.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2.0  # 4 x
-        q = vec4(0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s)
-    elif R[1, 1] > R[2, 2]:
-        s = ti.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2.0  # 4 y
-        q = vec4((R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s)
-    else:
-        s = ti.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2.0  # 4 z
-        q = vec4((R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s)
-    return q.normalized()
-
-
-@ti.func
-def quat_to_matrix(q: vec4):
-    """3x3 rotation matrix of a unit quaternion (its columns are the rotated axes)."""
-    return ti.Matrix.cols([quat_rotate(q, vec3(1.0, 0.0, 0.0)), quat_rotate(q, vec3(0.0, 1.0, 0.0)),
-                           quat_rotate(q, vec3(0.0, 0.0, 1.0))])
-
-
-@ti.func
-def quat_slerp(a: vec4, b: vec4, u: float) -> vec4:
-    """Spherical interpolation from unit quaternion a (u = 0) to b (u = 1), along the shorter arc."""
-    d = a.dot(b)
-    bb = b
-    if d < 0.0:
-        bb = -b
-        d = -d
-    out = bb
-    if d > 0.9995:  # nearly equal: linear interpolation, renormalised
-        out = (a + u * (bb - a)).normalized()
-    else:
-        theta = ti.acos(ti.min(d, 1.0))
-        out = ((ti.sin((1.0 - u) * theta) * a + ti.sin(u * theta) * bb) / ti.sin(theta)).normalized()
-    return out
-
-
+# =========================================================================== frames
 @ti.func
 def safe_normalized(v: vec3, fallback: vec3) -> vec3:
     """v / |v|, or ``fallback`` when v is (nearly) zero: collapsed vertices must not make NaN frames."""

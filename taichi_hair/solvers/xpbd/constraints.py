@@ -2,7 +2,7 @@
 
 Unknowns: vertex positions x_i and one unit quaternion q_j per edge (the
 material frame (d1, d2, d3) = R(q_j)(e1, e2, e3)).  Quaternions are ``vec4``
-stored as (w, x, y, z).
+stored as (x, y, z, w), the order of :mod:`taichi_hair.rotation` (which holds their algebra).
 
 Constraints (both dimensionless, vector valued, one Lagrange multiplier
 vector each, reset at every substep):
@@ -45,82 +45,21 @@ other (Gauss-Seidel across colors).  No atomics: reruns are bitwise identical.
 import taichi as ti
 
 from ...frames import wrap_angle
+from ...rotation import quat_conjugate, quat_d3, quat_from_frame, quat_from_matrix, quat_mul, quat_pure, quat_rotate
 from ...strains import material_frame, signed_angle
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
 
 
-# --------------------------------------------------------------------------- quaternion algebra
-@ti.func
-def quat_mul(a: vec4, b: vec4) -> vec4:
-    """Hamilton product a b, quaternions stored (w, x, y, z)."""
-    va = vec3(a[1], a[2], a[3])
-    vb = vec3(b[1], b[2], b[3])
-    w = a[0] * b[0] - va.dot(vb)
-    v = a[0] * vb + b[0] * va + va.cross(vb)
-    return vec4(w, v[0], v[1], v[2])
-
-
-@ti.func
-def quat_conj(q: vec4) -> vec4:
-    return vec4(q[0], -q[1], -q[2], -q[3])
-
-
-@ti.func
-def quat_pure(v: vec3) -> vec4:
-    return vec4(0.0, v[0], v[1], v[2])
-
-
-@ti.func
-def quat_rotate(q: vec4, v: vec3) -> vec3:
-    """R(q) v for a unit quaternion q."""
-    u = vec3(q[1], q[2], q[3])
-    t = 2.0 * u.cross(v)
-    return v + q[0] * t + u.cross(t)
-
-
-@ti.func
-def quat_d3(q: vec4) -> vec3:
-    """Third director R(q) e3 of a unit quaternion."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return vec3(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y))
-
-
-@ti.func
-def quat_from_matrix(r: ti.math.mat3) -> vec4:
-    """Unit quaternion of a rotation matrix (Shepperd's method, branch on the largest term)."""
-    tr = r[0, 0] + r[1, 1] + r[2, 2]
-    q = vec4(0.0)
-    if tr > 0.0:
-        s = 2.0 * ti.sqrt(tr + 1.0)
-        q = vec4(0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s)
-    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-        s = 2.0 * ti.sqrt(ti.max(1.0 + r[0, 0] - r[1, 1] - r[2, 2], 1e-12))
-        q = vec4((r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s)
-    elif r[1, 1] > r[2, 2]:
-        s = 2.0 * ti.sqrt(ti.max(1.0 + r[1, 1] - r[0, 0] - r[2, 2], 1e-12))
-        q = vec4((r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s)
-    else:
-        s = 2.0 * ti.sqrt(ti.max(1.0 + r[2, 2] - r[0, 0] - r[1, 1], 1e-12))
-        q = vec4((r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s)
-    return q.normalized()
-
-
-@ti.func
-def quat_from_frame(d1: vec3, d2: vec3, d3: vec3) -> vec4:
-    """Quaternion of the frame whose columns are (d1, d2, d3)."""
-    return quat_from_matrix(ti.Matrix.cols([d1, d2, d3]))
-
-
 @ti.func
 def darboux_strain(qa: vec4, qb: vec4):
     """(2 s Im(conj(qa) qb), s): the Korner bending/twist strain of a pair and the sign s."""
-    r = quat_mul(quat_conj(qa), qb)
+    r = quat_mul(quat_conjugate(qa), qb)
     s = 1.0
-    if r[0] < 0.0:
+    if r[3] < 0.0:
         s = -1.0
-    return 2.0 * s * vec3(r[1], r[2], r[3]), s
+    return 2.0 * s * vec3(r[0], r[1], r[2]), s
 
 
 @ti.func
@@ -228,11 +167,11 @@ def predict_frame_at(i: ti.i32, edge: ti.template(), x: ti.template(), buf: ti.t
         else:
             a = quat_d3(q)
             t = (x[i + 1] - x[i]).normalized()
-            transport = vec4(1.0 + a.dot(t), *a.cross(t))
-            if transport[0] > 1e-6:
+            transport = vec4(*a.cross(t), 1.0 + a.dot(t))
+            if transport[3] > 1e-6:
                 q = quat_mul(transport.normalized(), q)
             half = 0.5 * dt * buf.edge_omega[i].dot(t)
-            q = quat_mul(vec4(ti.cos(half), *(ti.sin(half) * t)), q).normalized()
+            q = quat_mul(vec4(*(ti.sin(half) * t), ti.cos(half)), q).normalized()
         buf.edge_quaternion[i] = q
 
 
@@ -261,7 +200,7 @@ def solve_stretch_shear_at(i: ti.i32, edge: ti.template(), x: ti.template(), buf
     x[i] -= (wa / l) * dlam
     x[i + 1] += (wb / l) * dlam
     if wq > 0.0:
-        e3 = vec4(0.0, 0.0, 0.0, 1.0)
+        e3 = quat_pure(vec3(0.0, 0.0, 1.0))
         q += (2.0 * wq) * quat_mul(quat_pure(dlam), quat_mul(q, e3))
         buf.edge_quaternion[i] = q.normalized()
 
@@ -296,10 +235,10 @@ def update_velocity_at(i: ti.i32, edge: ti.template(), vs: ti.template(), buf: t
     """v = (x - x_prev)/dt and omega = 2 Im(q conj(q_prev))/dt (closer sign), times the decay factor."""
     vs.vertex_velocity[i] = decay * (vs.vertex_position[i] - buf.vertex_position_previous[i]) / dt
     if edge.edge_rest_length[i] > 0.0:
-        r = quat_mul(buf.edge_quaternion[i], quat_conj(buf.edge_quaternion_previous[i]))
-        if r[0] < 0.0:
+        r = quat_mul(buf.edge_quaternion[i], quat_conjugate(buf.edge_quaternion_previous[i]))
+        if r[3] < 0.0:
             r = -r
-        buf.edge_omega[i] = decay * 2.0 * vec3(r[1], r[2], r[3]) / dt
+        buf.edge_omega[i] = decay * 2.0 * vec3(r[0], r[1], r[2]) / dt
 
 
 @ti.func

@@ -98,6 +98,7 @@ from ...admm import find_non_finite
 from ...solver_base import SolverBase
 from ...frames import update_reference_frames
 from ...model import Model, _np_float
+from ...rotation import quat_conjugate_np, quat_from_matrix_np, quat_mul_np
 from ...state import Control, State
 
 vec3 = ti.math.vec3
@@ -301,13 +302,13 @@ class SolverXPBD(SolverBase):
         d1 = rest.edge_material_d1.to_numpy().astype(np.float64)
         d2 = rest.edge_material_d2.to_numpy().astype(np.float64)
         t = rest.edge_tangent.to_numpy().astype(np.float64)
-        q = np.zeros((n, 4))
-        q[edge_ok] = _quat_from_frames(d1[edge_ok], d2[edge_ok], t[edge_ok])
+        q = np.zeros((n, 4))  # (x, y, z, w), taichi_hair.rotation's order
+        q[edge_ok] = quat_from_matrix_np(np.stack([d1[edge_ok], d2[edge_ok], t[edge_ok]], axis=2))
         darboux = np.zeros((n, 3))
         ia = np.where(active)[0]
-        r = _quat_mul(_quat_conj(q[ia - 1]), q[ia])
-        s = np.where(r[:, 0] < 0, -1.0, 1.0)
-        darboux[ia] = 2.0 * s[:, None] * r[:, 1:]
+        r = quat_mul_np(quat_conjugate_np(q[ia - 1]), q[ia])
+        s = np.where(r[:, 3] < 0, -1.0, 1.0)
+        darboux[ia] = 2.0 * s[:, None] * r[:, :3]
         b.edge_rest_quaternion.from_numpy(q.astype(f))
         b.pair_rest_darboux.from_numpy(darboux.astype(f))
         self.host_pair_voronoi_bend = vstar
@@ -380,36 +381,3 @@ class SolverXPBD(SolverBase):
         out[ok] = np.linalg.norm(e[ok], axis=1) / le[ok] - 1.0
         return out
 
-
-# --------------------------------------------------------------------------- host quaternion helpers
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w = a[:, 0] * b[:, 0] - np.sum(a[:, 1:] * b[:, 1:], axis=1)
-    v = a[:, :1] * b[:, 1:] + b[:, :1] * a[:, 1:] + np.cross(a[:, 1:], b[:, 1:])
-    return np.c_[w, v]
-
-
-def _quat_conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def _quat_from_frames(d1: np.ndarray, d2: np.ndarray, d3: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z) of the frames with columns (d1, d2, d3), shape (k, 4)."""
-    r = np.stack([d1, d2, d3], axis=2)  # r[:, row, col]
-    out = np.zeros((r.shape[0], 4))
-    for k in range(r.shape[0]):
-        m = r[k]
-        tr = np.trace(m)
-        if tr > 0:
-            s = 2.0 * math.sqrt(tr + 1.0)
-            q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-        elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-            s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-            q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-        elif m[1, 1] > m[2, 2]:
-            s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-            q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-        else:
-            s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-            q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-        out[k] = q
-    return out / np.linalg.norm(out, axis=1, keepdims=True)

@@ -1,0 +1,248 @@
+"""Scene set-up from the tables of a scene file (:mod:`taichi_hair.scene.file`): the groom (a file or a
+generator), the colliders and the solver with its config.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+
+from .schema import SceneError, Table, at_least, dataclass_from, positive
+
+SOLVERS = ("admm", "shape", "xpbd")
+COLLIDER_TYPES = ("sphere", "capsule", "plane", "mesh")
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+
+
+def resolve_path(base_dir: str, p: str) -> str:
+    p = os.path.expanduser(p)
+    return p if os.path.isabs(p) else os.path.normpath(os.path.join(base_dir, p))
+
+
+def subsample_groom(groom, count: int):
+    """``count`` strands evenly spaced through the groom (all when it has fewer)."""
+    from ..io.groom import Groom
+
+    ns = groom.strand_count
+    if count >= ns:
+        return groom
+    idx = np.unique(np.linspace(0, ns - 1, count).round().astype(int))
+    off = groom.strand_offsets
+    verts = np.concatenate([np.arange(off[s], off[s + 1]) for s in idx])
+    counts = off[idx + 1] - off[idx]
+
+    def pick(a, per_vertex_ok=True):
+        if a is None:
+            return None
+        if a.shape[0] == groom.vertex_count and per_vertex_ok:
+            return a[verts]
+        return a[idx]
+
+    return Groom(points=groom.points[verts], strand_offsets=np.r_[0, np.cumsum(counts)].astype(np.int64),
+                 radius=pick(groom.radius), color=pick(groom.color), region=pick(groom.region, False),
+                 guide=pick(groom.guide, False), rest_points=None if groom.rest_points is None
+                 else groom.rest_points[verts], pinned=None if groom.pinned is None else groom.pinned[verts],
+                 params=dict(groom.params), units=groom.units).validate()
+
+
+def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
+    from ..groom.generators import STYLES, GeneratorConfig, generate_groom, load_head, sphere_surface
+    from ..io import UnitsWarning, load_groom, units_warning
+    from ..io.groom import Groom
+
+    root = t.get("root", "str", "clamped", lambda v: None if v in ("clamped", "free") else
+                 f"must be 'clamped' or 'free', got {v!r}")
+    body = t.get("body", "int", 0, at_least(0))
+    desc.update(root=root, body=body)
+    if t.has("file") == t.has("generator"):
+        t.fail("give either 'file' (a groom file) or 'generator' (one of " + ", ".join(STYLES) + ")")
+    if t.has("file"):
+        files = t.data["file"]
+        t.used.add("file")
+        files = [files] if isinstance(files, str) else files
+        if not (isinstance(files, list) and files and all(isinstance(f, str) for f in files)):
+            t.fail("must be a file name or a list of file names", "file")
+        scale = t.get("scale", "float", None, positive)
+        units = t.get("units", "str", None, lambda v: None if v in UNITS else
+                      f"must be one of {', '.join(UNITS)}, got {v!r}")
+        if scale is not None and units is not None:
+            t.fail("give 'scale' or 'units', not both")
+        scale = scale if scale is not None else UNITS[units] if units else 1.0
+        fmt = t.get("format", "str", None)
+        strands = t.get("strands", "int", None, at_least(1))
+        if "strands" in overrides:
+            strands = overrides["strands"]
+        for key in ("length", "seed", "vertices_per_strand"):
+            if key in overrides:
+                raise SceneError(f"{t.path}: [groom]: --{key.replace('_', '-')} applies to generated grooms; "
+                                 f"this scene reads {files[0]}")
+        t.done()
+        parts = []
+        import warnings
+        for f in files:
+            p = resolve_path(base, f)
+            if not os.path.exists(p):
+                t.fail(f"no such file: {p}", "file")
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                g = load_groom(p, format=fmt, scale=scale)
+            for w in caught:  # the reader's own notes pass; the unit check is redone below for the scene
+                if not issubclass(w.category, UnitsWarning):
+                    warnings.warn(w.message, w.category, stacklevel=2)
+            msg = units_warning(g, f"{t.path}: [groom] file {f}", applied_scale=scale, context="scene")
+            if msg:
+                warnings.warn(msg, UnitsWarning, stacklevel=2)
+            parts.append(g)
+        if len(parts) == 1:
+            groom = parts[0]
+        else:
+            polys = [pl.astype(np.float64) for g in parts for pl in g.to_polylines()]
+            radii = [g.radius if g.radius is not None and g.radius.shape[0] == g.strand_count else None
+                     for g in parts]
+            radius = np.concatenate(radii) if all(r is not None for r in radii) else None
+            groom = Groom.from_polylines(polys, radius=radius, units="m")
+        if strands is not None:
+            groom = subsample_groom(groom, strands)
+        desc.update(file=[resolve_path(base, f) for f in files], scale=scale, strands=groom.strand_count)
+        return groom, root, body
+    style = t.get("generator", "str", None, lambda v: None if v in STYLES else
+                  f"must be one of {', '.join(STYLES)}, got {v!r}")
+    surface = t.get("surface", "str", "head")
+    sph_r = t.get("sphere_radius", "float", 0.09, positive)
+    sph_c = t.get("sphere_center", "vec3", (0.0, 0.0, 0.0))
+    cap = t.get("scalp_min_y", "float", 0.0)
+    if surface != "sphere" and any(t.has(k) for k in ("sphere_radius", "sphere_center", "scalp_min_y")):
+        t.fail("sphere_radius, sphere_center and scalp_min_y need surface = \"sphere\"")
+    values = t.rest()
+    for key in ("strands", "length", "seed", "vertices_per_strand"):
+        if key in overrides:
+            values[key] = overrides[key]
+    if "down" in values and isinstance(values["down"], list):
+        values["down"] = tuple(values["down"])
+    cfg = dataclass_from(t, GeneratorConfig, dict(values, style=style), "the generator")
+    try:
+        if surface == "sphere":
+            surf = sphere_surface(sph_r, sph_c, cap)
+        elif surface == "head":
+            surf = load_head()
+        else:
+            surf = load_head(resolve_path(base, surface))
+    except ValueError as exc:
+        t.fail(str(exc), "surface")
+    groom = generate_groom(surf, cfg)
+    desc.update(generator=dataclasses.asdict(cfg), surface=surface, sphere=[sph_r, list(sph_c), cap])
+    desc["generator"]["down"] = list(cfg.down)
+    return groom, root, body
+
+
+def collider_from_table(t: Table, base: str):
+    from ..contact.colliders import CapsuleCollider, MeshCollider, PlaneCollider, SphereCollider
+
+    kind = t.get("type", "str", None, lambda v: None if v in COLLIDER_TYPES else
+                 f"must be one of {', '.join(COLLIDER_TYPES)}, got {v!r}")
+    if kind is None:
+        t.fail("missing key 'type' (one of " + ", ".join(COLLIDER_TYPES) + ")")
+    common = dict(friction=t.get("friction", "float", 0.3), body=t.get("body", "int", -1))
+    if t.has("strands"):
+        s = t.get("strands", "list")
+        common["strands"] = tuple(s)
+    desc = {"type": kind, **common}
+    try:
+        if kind == "sphere":
+            c = SphereCollider(center=t.get("center", "vec3", (0.0, 0.0, 0.0)),
+                               radius=t.get("radius", "float", 0.1), **common)
+        elif kind == "capsule":
+            c = CapsuleCollider(p0=t.get("p0", "vec3", (0.0, 0.0, 0.0)), p1=t.get("p1", "vec3", (0.0, 0.1, 0.0)),
+                                radius=t.get("radius", "float", 0.05), **common)
+        elif kind == "plane":
+            c = PlaneCollider(point=t.get("point", "vec3", (0.0, 0.0, 0.0)),
+                              normal=t.get("normal", "vec3", (0.0, 1.0, 0.0)), **common)
+        else:
+            f = t.get("file", "str", None)
+            if f is None:
+                t.fail("missing key 'file' (the mesh)")
+            p = resolve_path(base, f)
+            if not os.path.exists(p):
+                t.fail(f"no such file: {p}", "file")
+            scale = t.get("scale", "float", 1.0, positive)
+            res = t.get("resolution", "int", 64)
+            pad = t.get("padding", "float", 0.15)
+            thick = t.get("thickness", "float", 1e-3)
+            t.done()
+            mesh = p
+            if scale != 1.0:
+                import trimesh
+
+                try:
+                    mesh = trimesh.load(p, force="mesh")
+                except Exception as exc:  # noqa: BLE001 - trimesh raises many types
+                    t.fail(f"cannot load {p}: {exc}", "file")
+                mesh.apply_scale(scale)
+            c = MeshCollider(mesh=mesh, resolution=res, padding=pad, thickness=thick, **common)
+            desc.update(file=p, scale=scale, resolution=res, padding=pad, thickness=thick)
+    except ValueError as exc:
+        t.fail(str(exc))
+    t.done()
+    for k in ("center", "radius", "p0", "p1", "point", "normal"):
+        if hasattr(c, k) and not isinstance(c, MeshCollider):
+            v = getattr(c, k)
+            desc[k] = np.asarray(v).tolist() if not isinstance(v, float) else v
+    return c, desc
+
+
+
+def solver_from_table(t: Table, overrides: dict, colliders: list):
+    from ..config import ContactConfig, SolverADMMConfig
+    from ..solvers.shape.solver import ShapeRegion, SolverShapeConfig
+    from ..solvers.xpbd.solver import SolverXPBDConfig
+
+    kind = t.get("type", "str", "admm", lambda v: None if v in SOLVERS else
+                 f"must be one of {', '.join(SOLVERS)}, got {v!r}")
+    values = t.rest(exclude=("contacts", "region"))
+    if kind != "admm" and overrides.get("continuous"):
+        t.fail(f"--continuous applies to type = \"admm\", not {kind!r}", "type")
+    if kind == "shape" and "iterations" in overrides:
+        t.fail("--iterations applies to type = \"admm\" or \"xpbd\"; set [solver.region] "
+               "local_iterations / length_iterations for \"shape\"", "type")
+    if "iterations" in overrides:
+        values["iterations"] = overrides["iterations"]
+    if overrides.get("integrator"):
+        if kind != "admm":
+            t.fail(f"--integrator applies to type = \"admm\", not {kind!r}", "type")
+        values["integrator"] = overrides["integrator"]
+    desc = {"type": kind, **{k: v for k, v in values.items()}}
+    if kind == "admm":
+        contacts = t.get("contacts", "table", None)
+        if t.has("region"):
+            t.fail("[solver.region] is for type = \"shape\"", "region")
+        if contacts is None and overrides.get("continuous"):
+            t.fail("--continuous needs hair contacts: add a [solver.contacts] table", "contacts")
+        if contacts is not None:
+            ct = Table(t.path, f"{t.name}.contacts", contacts)
+            cvalues = ct.rest()
+            if overrides.get("continuous"):
+                cvalues["continuous_detections"] = overrides["continuous"]
+            values["contacts"] = dataclass_from(ct, ContactConfig, cvalues, "ContactConfig")
+            desc["contacts"] = cvalues
+        cfg = dataclass_from(t, SolverADMMConfig, values, "SolverADMMConfig")
+    elif kind == "shape":
+        if t.has("contacts"):
+            t.fail("[solver.contacts] is for type = \"admm\"", "contacts")
+        region = t.get("region", "table", {})
+        rt = Table(t.path, f"{t.name}.region", region)
+        reg = dataclass_from(rt, ShapeRegion, rt.rest(), "ShapeRegion")
+        desc["region"] = region
+        cfg = dataclass_from(t, SolverShapeConfig, dict(values, regions=(reg,)), "SolverShapeConfig")
+    else:
+        for k in ("contacts", "region"):
+            if t.has(k):
+                t.fail(f"[solver.{k}] is not for type = \"xpbd\"", k)
+        if colliders:
+            raise SceneError(f"{t.path}: [[colliders]]: solver type \"xpbd\" has no collisions; remove the "
+                             f"colliders or use type = \"admm\"")
+        cfg = dataclass_from(t, SolverXPBDConfig, values, "SolverXPBDConfig")
+    t.done()
+    return kind, cfg, desc
+
