@@ -122,18 +122,55 @@ class EdgeStateFields:
         self.edge_reference_twist = ti.field(float, n)
 
 
-class SolverBuffers:
-    """Scratch and history of SolverADMM.  Shape (vertex_count,) unless stated."""
+class SolverCoefficients:
+    """What SolverADMM derives from the Model (``_set_coefficients``; again after ``refresh_model``).
+    Shape (vertex_count,)."""
 
     def __init__(self, n: int):
-        #: Begin-of-step positions x^t [m] and velocities v^t [m/s].  Between two steps they hold
-        #: those of the last step, x_{n-1} and v_{n-1}: the BDF2 history (``SolverADMM.checkpoint``).
+        #: Rest strain kappa_bar of each pair for the chosen strain measure [-].
+        self.pair_rest_kappa = ti.field(vec3, n)
+        #: Diagonal of E_b K / v_i*, v_i* the bending Voronoi length (rescaled at the
+        #: strand ends when enabled, Sec. 5.1) [J].
+        self.pair_bend_stiffness = ti.field(vec3, n)
+        #: ADMM weight W_y,i = w0 E_b A R^2 / (4 v_i*^3) (Sec. 4.4) [N/m].
+        self.pair_admm_weight = ti.field(float, n)
+        #: Stretch stiffness E_s A e_j seen by one pair, halved when the edge belongs
+        #: to two pairs (Sec. 4.4) [N m].
+        self.edge_pair_stretch_stiffness = ti.field(float, n)
+
+
+class SolverWarmStart:
+    """The elasticity duals warm-started from step to step (checkpointed as a group; ``reset_duals``
+    clears them).  Shape (vertex_count,)."""
+
+    def __init__(self, n: int):
+        #: Scaled dual lambda_y [m], in the root-attachment frame Q^t when enabled.
+        self.pair_dual = ti.field(vec6, n)
+        #: Force of pair i on the global step, W_y (lambda + y - Bx)_i, world frame [N].
+        self.pair_force = ti.field(vec6, n)
+
+
+class StepHistory:
+    """Begin-of-step copies of the State, restored when a step diverges; between two steps they hold
+    the last step's, x_{n-1}, v_{n-1}, theta_{n-1}, omega_{n-1}, kappa_{n-1}, eps_{n-1}: the BDF2 history
+    (checkpointed as a group with BDF2).  Shape (vertex_count,)."""
+
+    def __init__(self, n: int):
+        #: Begin-of-step positions x^t [m] and velocities v^t [m/s].
         self.vertex_position_begin = ti.field(vec3, n)
         self.vertex_velocity_begin = ti.field(vec3, n)
-        #: Begin-of-step twists theta^t [rad] and angular velocities omega^t [rad/s]; between steps
-        #: theta_{n-1} and omega_{n-1} (BDF2 history), as above.
+        #: Begin-of-step twists theta^t [rad] and angular velocities omega^t [rad/s].
         self.edge_twist_begin = ti.field(float, n)
         self.edge_angular_velocity_begin = ti.field(float, n)
+        #: BDF2 only: the begin-of-step strains of the last step, kappa_{n-1} [-] and eps_{n-1} [-].
+        self.pair_kappa_previous = ti.field(vec3, n)
+        self.edge_strain_previous = ti.field(float, n)
+
+
+class StepScratch:
+    """Written and read within one step (nothing here survives it).  Shape (vertex_count,)."""
+
+    def __init__(self, n: int):
         #: Origin of the step's velocity, v_{n+1} = (x - x_hat) / h [m], and the velocity of the inertial
         #: predictor x_pred = x_hat + h v_hat [m/s]: x_hat = x^t, v_hat = v^t for backward Euler,
         #: (4 x_n - x_{n-1}) / 3 and (4 v_n - v_{n-1}) / 3 for BDF2 (``admm.begin_step``).
@@ -147,27 +184,10 @@ class SolverBuffers:
         #: for BDF2, ``admm.bdf2_strain_origin``).
         self.pair_kappa_begin = ti.field(vec3, n)
         self.edge_strain_begin = ti.field(float, n)
-        #: BDF2 only: the begin-of-step strains of the last step, kappa_{n-1} [-] and eps_{n-1} [-].
-        self.pair_kappa_previous = ti.field(vec3, n)
-        self.edge_strain_previous = ti.field(float, n)
-        #: Force of pair i on the global step, W_y (lambda + y - Bx)_i, world frame [N].
-        self.pair_force = ti.field(vec6, n)
-        #: Scaled dual lambda_y [m], in the root-attachment frame Q^t when enabled.
-        self.pair_dual = ti.field(vec6, n)
         #: Per-pair twist Hessian (d2/dtheta_a^2, d2/dtheta_b^2, d2/dtheta_a dtheta_b) [J]
         #: and gradient (d/dtheta_a, d/dtheta_b) [J], assembled into the twist system.
         self.pair_twist_hessian = ti.field(vec3, n)
         self.pair_twist_gradient = ti.field(ti.math.vec2, n)
-        #: Rest strain kappa_bar of each pair for the chosen strain measure [-].
-        self.pair_rest_kappa = ti.field(vec3, n)
-        #: Diagonal of E_b K / v_i*, v_i* the bending Voronoi length (rescaled at the
-        #: strand ends when enabled, Sec. 5.1) [J].
-        self.pair_bend_stiffness = ti.field(vec3, n)
-        #: ADMM weight W_y,i = w0 E_b A R^2 / (4 v_i*^3) (Sec. 4.4) [N/m].
-        self.pair_admm_weight = ti.field(float, n)
-        #: Stretch stiffness E_s A e_j seen by one pair, halved when the edge belongs
-        #: to two pairs (Sec. 4.4) [N m].
-        self.edge_pair_stretch_stiffness = ti.field(float, n)
         #: Tridiagonal systems: lower/diag/upper [N/m or J], right-hand sides.
         self.tri_lower = ti.field(float, n)
         self.tri_diag = ti.field(float, n)
@@ -180,6 +200,32 @@ class SolverBuffers:
         self.vertex_contact_weight = ti.field(float, n)
         #: lambda_z + z, the collision target of the global step: f += W_z (lambda_z + z - x) [m].
         self.vertex_contact_target = ti.field(vec3, n)
+
+
+class SolverBuffers:
+    """SolverADMM's buffers, by lifetime: ``coefficients`` (from the Model), ``warm_start`` (duals carried
+    between steps), ``history`` (begin-of-step copies, the BDF2 history) and ``scratch`` (within a step).
+
+    Kernels take the whole object once (``b: ti.template()``, one kernel instance) and read each field
+    by name (``b.pair_dual``): every group's fields are also attributes of this object, the same field
+    objects.
+    """
+
+    GROUPS = ("coefficients", "warm_start", "history", "scratch")
+
+    def __init__(self, n: int):
+        self.coefficients = SolverCoefficients(n)
+        self.warm_start = SolverWarmStart(n)
+        self.history = StepHistory(n)
+        self.scratch = StepScratch(n)
+        for group in self.GROUPS:
+            for name, field in vars(getattr(self, group)).items():
+                setattr(self, name, field)
+
+    @staticmethod
+    def names(group) -> tuple:
+        """The field names of one group, in their declaration order."""
+        return tuple(vars(group))
 
 
 # --------------------------------------------------------------------------- contacts (Sec. 4.5)

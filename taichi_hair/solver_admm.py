@@ -83,9 +83,6 @@ STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "
           "correction", "end")
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")  # finite-check order
-#: Solver buffers that hold the BDF2 history between steps (saved by ``SolverADMM.checkpoint``).
-_HISTORY_FIELDS = ("vertex_position_begin", "vertex_velocity_begin", "edge_twist_begin",
-                   "edge_angular_velocity_begin", "pair_kappa_previous", "edge_strain_previous")
 
 
 class SolverADMM(SolverBase):
@@ -418,11 +415,11 @@ class SolverADMM(SolverBase):
         step, so they hold nothing across steps.
         """
         b = self.buf
-        snap = {"pair_dual": b.pair_dual.to_numpy(), "pair_force": b.pair_force.to_numpy(),
-                "step_count": np.int64(self.step_count), "iteration_count": np.int64(self.iteration_count),
-                "history_dt": np.float64(np.nan if self._history_dt is None else self._history_dt)}
+        snap = {key: getattr(b, key).to_numpy() for key in SolverBuffers.names(b.warm_start)}
+        snap.update({"step_count": np.int64(self.step_count), "iteration_count": np.int64(self.iteration_count),
+                     "history_dt": np.float64(np.nan if self._history_dt is None else self._history_dt)})
         if self._history_dt is not None:
-            for key in _HISTORY_FIELDS:
+            for key in SolverBuffers.names(b.history):
                 snap["history_" + key] = getattr(b, key).to_numpy()
         if self.contacts is not None:
             cs = self.contacts.colliders
@@ -435,7 +432,7 @@ class SolverADMM(SolverBase):
     def restore(self, snapshot: dict) -> None:
         """Load what :meth:`checkpoint` returned (same Model layout)."""
         n = self.model.vertex_count
-        for key in ("pair_dual", "pair_force"):
+        for key in SolverBuffers.names(self.buf.warm_start):
             a = np.asarray(snapshot[key])
             if a.shape != (n, 6):
                 raise ValueError(f"SolverADMM.restore: {key} has shape {a.shape}, expected {(n, 6)}")
@@ -446,7 +443,7 @@ class SolverADMM(SolverBase):
         hdt = float(snapshot.get("history_dt", np.nan))
         self._history_dt = None
         if np.isfinite(hdt):
-            for key in _HISTORY_FIELDS:
+            for key in SolverBuffers.names(self.buf.history):
                 field = getattr(self.buf, key)
                 a = np.asarray(snapshot["history_" + key])
                 if a.shape[0] != n:
