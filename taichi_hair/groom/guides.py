@@ -180,3 +180,24 @@ def _per_strand(value, count: int, name: str, default):
             raise ValueError(f"{name} has {len(value)} entries for {count} strands")
         return list(value)
     return [value] * count
+
+
+class GuideChoice:
+    """The guide strands of a grooming session, cached on the rest roots and the settings (edits
+    keep the roots, so the farthest-point sampling runs once per layout)."""
+
+    def __init__(self):
+        self._cached = None
+
+    def strands(self, rest_points: np.ndarray, strand_offsets: np.ndarray, guide_ratio: float,
+                seed: int) -> np.ndarray:
+        """Sorted int64 indices of the guides (every strand for ``guide_ratio`` 1), a copy."""
+        if guide_ratio >= 1.0:
+            return np.arange(len(strand_offsets) - 1)
+        roots = rest_points.astype(np.float64)[strand_offsets[:-1]]
+        key = (roots.tobytes(), guide_ratio, seed)
+        if self._cached is not None and self._cached[0] == key:
+            return self._cached[1].copy()
+        guides = np.sort(select_guides(roots, guide_ratio, seed))
+        self._cached = (key, guides)
+        return guides.copy()
