@@ -21,7 +21,7 @@ import numpy as np
 
 from .common import CLIError, _init_taichi
 
-REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 # =========================================================================== shared set-up

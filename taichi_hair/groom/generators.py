@@ -53,7 +53,8 @@ import numpy as np
 STYLES = ("straight", "wavy", "curly")
 
 #: ``assets/head.obj`` of the repository (made by ``assets/make_head.py``).
-HEAD_MESH_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "assets", "head.obj")
+HEAD_MESH_PATH = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "assets",
+                              "head.obj")
 
 
 # --------------------------------------------------------------------------- surfaces
