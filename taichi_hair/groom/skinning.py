@@ -4,18 +4,20 @@ Physics-based grooming simulates only a fraction (about 10 %) of the strands,
 the *guides*, and deforms the remaining *render strands* by linear blend
 skinning (LBS) of the guides' motion.  Three stages:
 
-1. **Guide selection** (:func:`select_guides`, :func:`build_guides`): farthest-
-   point sampling of the root positions from a seeded start, so the guides
-   cover the scalp evenly; the guide-only :class:`Model` is made by
-   :class:`GroomBuilder` with the same polylines and materials.
-2. **Binding** (:func:`compute_binding`, host NumPy, float64, once): each render
-   strand is bound to its k nearest guides by root distance, with normalised
-   inverse-distance weights (a guide binds to itself with weight 1).  Along the
-   strand, binding is by normalised arc length: a render vertex at arc
-   fraction s follows, on every bound guide, the rest edge j that contains the
-   guide's own arc fraction s, at the edge parameter u in [0, 1].  The render
-   vertex's rest position p is stored in that edge's rest frame Q_j (columns
-   t, d1, d2):  ``c = Q_j^T (p - o_j(u))``,  ``o_j(u) = (1-u) x_j + u x_{j+1}``.
+1. **Guide selection** (:func:`select_guides`, :func:`build_guides`, in
+   :mod:`taichi_hair.groom.guides`): farthest-point sampling of the root
+   positions from a seeded start, so the guides cover the scalp evenly; the
+   guide-only :class:`Model` is made by :class:`GroomBuilder` with the same
+   polylines and materials.
+2. **Binding** (:func:`compute_binding`, in :mod:`taichi_hair.groom.binding`,
+   host NumPy, float64, once): each render strand is bound to its k nearest
+   guides by root distance, with normalised inverse-distance weights (a guide
+   binds to itself with weight 1).  Along the strand, binding is by normalised
+   arc length: a render vertex at arc fraction s follows, on every bound guide,
+   the rest edge j that contains the guide's own arc fraction s, at the edge
+   parameter u in [0, 1].  The render vertex's rest position p is stored in
+   that edge's rest frame Q_j (columns t, d1, d2):  ``c = Q_j^T (p - o_j(u))``,
+   ``o_j(u) = (1-u) x_j + u x_{j+1}``.
 3. **Deformation** (:meth:`SkinningLBS.deform`, two Taichi kernels per frame):
    the current frame Q'_j of every guide edge is computed, then each render
    vertex is placed at ``x = sum_k w_k [ o'_jk(u_k) + Q'_jk c_k ]``.  Each term
@@ -48,7 +50,7 @@ Frames (``SkinningConfig.frame``):
    per-strand max and RMS [m], and an RGB ramp for an overlay.
 
 Everything is allocated in :class:`SkinningLBS` ``__init__``; ``deform``
-allocates nothing.
+allocates nothing.  The names of stages 1 and 2 are importable from here too.
 """
 
 
@@ -58,333 +60,17 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..builder import GroomBuilder, points_array
-from ..config import RodMaterial
 from ..model import Model, _np_float
 from ..state import Control, State
 from ..strains import parallel_transport
+from .binding import _arc_fractions, compute_binding
+from .guides import FRAMES, SkinningConfig, _as_points, _per_strand, build_guides, select_guides
+
+__all__ = ["FRAMES", "SkinningConfig", "select_guides", "build_guides", "compute_binding", "SkinningFields",
+           "frame_matrix", "compute_guide_frames_transport", "compute_guide_frames_material", "apply_skinning",
+           "SkinningLBS", "InterpolationError", "interpolation_error", "error_colors", "_arc_fractions"]
 
 vec3 = ti.math.vec3
-FRAMES = ("transport", "material")
-
-
-# =========================================================================== configuration
-@dataclass
-class SkinningConfig:
-    """Settings of guide selection and skinning (Sec. 5.3).
-
-    Attributes:
-        guide_ratio: fraction of the strands simulated as guides, in (0, 1] [-];
-            the paper uses 10 %.  The guide count is round(ratio * strands), at least 1.
-        neighbour_count: k, number of guides each render strand follows [-];
-            capped at the number of guides.
-        frame: ``"transport"`` (space-parallel transported frame from the
-            positions) or ``"material"`` (the State's DER material frame); see
-            the module docstring.
-        seed: seed of the random start of farthest-point sampling [-].
-    """
-
-    guide_ratio: float = 0.1
-    neighbour_count: int = 4
-    frame: str = "transport"
-    seed: int = 0
-
-    def __post_init__(self):
-        _check_ratio("SkinningConfig.guide_ratio", self.guide_ratio)
-        _check_neighbours("SkinningConfig.neighbour_count", self.neighbour_count)
-        if self.frame not in FRAMES:
-            raise ValueError(f"SkinningConfig.frame must be one of {FRAMES}, got {self.frame!r}")
-        if not isinstance(self.seed, (int, np.integer)):
-            raise ValueError(f"SkinningConfig.seed must be an integer, got {self.seed!r}")
-
-
-def _check_ratio(name: str, ratio) -> None:
-    if not (isinstance(ratio, (int, float, np.floating)) and math.isfinite(ratio) and 0.0 < ratio <= 1.0):
-        raise ValueError(f"{name} must lie in (0, 1], got {ratio!r}")
-
-
-def _check_neighbours(name: str, k) -> None:
-    if not (isinstance(k, (int, np.integer)) and not isinstance(k, bool) and k >= 1):
-        raise ValueError(f"{name} must be an integer >= 1, got {k!r}")
-
-
-# =========================================================================== guide selection
-def select_guides(root_positions, guide_ratio: float = 0.1, seed: int = 0) -> np.ndarray:
-    """Farthest-point sampling of strand roots.
-
-    Starts from a root drawn with ``numpy.random.default_rng(seed)``, then
-    repeatedly adds the root farthest (Euclidean) from every root chosen so far
-    (ties: lowest index), so the result is deterministic and spreads the
-    guides evenly over the scalp.
-
-    Args:
-        root_positions: (strand_count, 3) root positions [m].
-        guide_ratio: fraction of strands to choose, in (0, 1].
-        seed: seed of the starting root.
-
-    Returns:
-        (guide_count,) int64 strand indices in the order chosen,
-        guide_count = max(1, round(guide_ratio * strand_count)).
-    """
-    _check_ratio("select_guides: field 'guide_ratio'", guide_ratio)
-    roots = _as_points(root_positions, "select_guides: field 'root_positions'")
-    n = roots.shape[0]
-    if n == 0:
-        raise ValueError("select_guides: field 'root_positions' is empty")
-    from scipy.spatial import cKDTree
-
-    count = min(n, max(1, int(round(guide_ratio * n))))
-    chosen = np.empty(count, dtype=np.int64)
-    chosen[0] = int(np.random.default_rng(seed).integers(n))
-    dist2 = np.sum((roots - roots[chosen[0]]) ** 2, axis=1)
-    tree = cKDTree(roots)
-    for c in range(1, count):
-        nxt = int(np.argmax(dist2))
-        chosen[c] = nxt
-        # Only roots closer to the new guide than the current maximum distance can get
-        # closer: update those (a ball query) instead of all n; same result as brute force.
-        near = np.asarray(tree.query_ball_point(roots[nxt], math.sqrt(dist2[nxt]) * (1.0 + 1e-9) + 1e-300),
-                          dtype=np.int64)
-        if near.size:
-            d2 = np.sum((roots[near] - roots[nxt]) ** 2, axis=1)
-            dist2[near] = np.minimum(dist2[near], d2)
-    return chosen
-
-
-def build_guides(strands, materials=None, config: SkinningConfig | None = None, root: str = "clamped",
-                 body=0):
-    """Choose guides among render strand polylines and build the guide-only Model.
-
-    Args:
-        strands: sequence of (m_s, 3) polylines, root first [m] (the full groom).
-        materials: None (default :class:`RodMaterial`), one RodMaterial for all,
-            or a sequence with one per strand.
-        config: :class:`SkinningConfig` (guide_ratio and seed are used).
-        root, body: passed to :meth:`GroomBuilder.add_strand` for every guide;
-            ``body`` may be an int or a per-strand sequence.
-
-    Returns:
-        ``(guide_indices, model)``: the strand indices of the guides (guide
-        strand g of ``model`` is ``strands[guide_indices[g]]``, same material)
-        and the guide :class:`Model`.
-    """
-    config = config or SkinningConfig()
-    polylines = _as_polylines(strands, "build_guides: field 'strands'")
-    ns = len(polylines)
-    mats = _per_strand(materials, ns, "build_guides: field 'materials'", RodMaterial())
-    bodies = _per_strand(body, ns, "build_guides: field 'body'", 0)
-    roots = np.array([p[0] for p in polylines])
-    guide_indices = select_guides(roots, config.guide_ratio, config.seed)
-    body_count = 1 + max(int(b) for b in bodies)
-    builder = GroomBuilder(body_count=body_count)
-    for s in guide_indices:
-        builder.add_strand(polylines[s], mats[s], root=root, body=int(bodies[s]))
-    return guide_indices, builder.finalize()
-
-
-def _as_points(a, name: str) -> np.ndarray:
-    arr = points_array(a, name)
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} has a non-finite coordinate")
-    return arr
-
-
-def _as_polylines(strands, name: str) -> list:
-    """Validate render polylines (vectorised over strands); returns a list of (m_s, 3) float64 arrays."""
-    if isinstance(strands, np.ndarray) and strands.ndim == 3 and strands.shape[2] == 3:
-        out = list(np.asarray(strands, dtype=np.float64))
-    else:
-        out = []
-        try:
-            for i, p in enumerate(strands):
-                out.append(points_array(p, f"{name}[{i}]", "m"))
-        except TypeError:
-            raise ValueError(f"{name} must be a sequence of (m, 3) polylines") from None
-    if not out:
-        raise ValueError(f"{name} is empty")
-    counts = np.array([p.shape[0] for p in out], dtype=np.int64)
-    short = np.where(counts < 2)[0]
-    if short.size:
-        i = int(short[0])
-        raise ValueError(f"{name}[{i}] has {counts[i]} vertices; a strand needs at least 2")
-    flat = np.concatenate(out)
-    strand_of = np.repeat(np.arange(counts.size), counts)
-    bad = np.where(~np.all(np.isfinite(flat), axis=1))[0]
-    if bad.size:
-        raise ValueError(f"{name}[{int(strand_of[bad[0]])}] has a non-finite coordinate")
-    same = strand_of[1:] == strand_of[:-1]
-    zero = np.where(same & np.all(flat[1:] == flat[:-1], axis=1))[0]
-    if zero.size:
-        raise ValueError(f"{name}[{int(strand_of[zero[0]])}] has a zero-length edge (repeated point)")
-    return out
-
-
-def _per_strand(value, count: int, name: str, default):
-    """None -> default for all; a scalar/object -> for all; a sequence -> checked length."""
-    if value is None:
-        return [default] * count
-    if isinstance(value, (list, tuple, np.ndarray)):
-        if len(value) != count:
-            raise ValueError(f"{name} has {len(value)} entries for {count} strands")
-        return list(value)
-    return [value] * count
-
-
-# =========================================================================== binding (host)
-def _arc_fractions(points: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised arc length of every vertex and the length of every strand.
-
-    Each strand's cumulative sum is taken on its own padded row, so two equal
-    polylines get bitwise equal fractions wherever they sit in the flat array.
-    """
-    ns = counts.shape[0]
-    mmax = int(counts.max())
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    local = np.arange(points.shape[0]) - np.repeat(starts, counts)
-    strand_of = np.repeat(np.arange(ns), counts)
-    grid = np.full((ns, mmax, 3), np.nan)
-    grid[strand_of, local] = points
-    seg = np.linalg.norm(np.diff(grid, axis=1), axis=2)
-    seg = np.nan_to_num(seg, nan=0.0)
-    cum = np.concatenate([np.zeros((ns, 1)), np.cumsum(seg, axis=1)], axis=1)
-    length = cum[np.arange(ns), counts - 1]
-    return cum[strand_of, local] / length[strand_of], length
-
-
-def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count: int = 4,
-                    frame: str = "transport", guide_rest_frames=None) -> dict:
-    """Bind render strands to guides (NumPy, float64).  See the module docstring.
-
-    Args:
-        guide_model: the guide :class:`Model` (rest positions and frames from ``host``).
-        guide_indices: (guide_count,) render strand index of each guide strand.
-        strands: sequence of render polylines (m_s, 3) [m].
-        neighbour_count: k (capped at the guide count).
-        frame: ``"transport"`` or ``"material"`` (rest frames from ``guide_rest_frames``).
-        guide_rest_frames: for ``"material"``: (tangent, d1, d2), each (guide_vertex_count, 3),
-            of the rest State; ignored otherwise.
-
-    Returns:
-        dict of arrays; ``V`` render vertices, ``K`` = min(k, guide_count):
-        ``render_strand_vertex_start/count`` (S,), ``render_vertex_rest_position`` (V, 3) [m],
-        ``render_strand_guides`` (S, K) guide strand indices, ``render_strand_weights`` (S, K),
-        ``render_vertex_bind_edge`` (V, K) guide edge (= start vertex) index,
-        ``render_vertex_bind_param`` (V, K) u in [0, 1], ``render_vertex_bind_local`` (V, K, 3) [m],
-        ``render_vertex_bind_weight`` (V, K).
-    """
-    from scipy.spatial import cKDTree
-
-    _check_neighbours("compute_binding: field 'neighbour_count'", neighbour_count)
-    if frame not in FRAMES:
-        raise ValueError(f"compute_binding: field 'frame' must be one of {FRAMES}, got {frame!r}")
-    if frame == "material" and guide_rest_frames is None:
-        raise ValueError("compute_binding: field 'guide_rest_frames' is needed for frame='material'")
-    polylines = _as_polylines(strands, "compute_binding: field 'strands'")
-    h = guide_model.host
-    gstart = h["strand_vertex_start"].astype(np.int64)
-    gcount = h["strand_vertex_count"].astype(np.int64)
-    ng = gstart.shape[0]
-    gidx = np.asarray(guide_indices, dtype=np.int64).reshape(-1)
-    if gidx.shape[0] != ng:
-        raise ValueError(f"compute_binding: field 'guide_indices' has {gidx.shape[0]} entries but the guide model "
-                         f"has {ng} strands (root count mismatch)")
-    ns = len(polylines)
-    if gidx.size and (gidx.min() < 0 or gidx.max() >= ns):
-        raise ValueError(f"compute_binding: field 'guide_indices' must index the {ns} render strands")
-    if np.unique(gidx).size != gidx.size:
-        raise ValueError("compute_binding: field 'guide_indices' has repeated strands")
-    X = h["vertex_rest_position"].astype(np.float64)
-    counts = np.array([p.shape[0] for p in polylines], dtype=np.int64)
-    mismatch = np.where(counts[gidx] != gcount)[0]
-    if not mismatch.size:
-        gp = np.concatenate([polylines[s] for s in gidx])
-        far = np.any(np.abs(gp - X) > 1e-9, axis=1)
-        mismatch = np.unique(np.repeat(np.arange(ng), gcount)[far])
-    if mismatch.size:
-        g = int(mismatch[0])
-        raise ValueError(f"compute_binding: field 'guide_indices': guide {g} is not render strand {int(gidx[g])} "
-                         "(different rest polyline)")
-
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    P = np.concatenate(polylines)
-    nv = P.shape[0]
-    strand_of = np.repeat(np.arange(ns), counts)
-    local = np.arange(nv) - starts[strand_of]
-    K = min(int(neighbour_count), ng)
-
-    # k nearest guides by root position, inverse-distance weights.
-    groots = X[gstart]
-    roots = P[starts]
-    dist, nbr = cKDTree(groots).query(roots, k=K)
-    dist = np.asarray(dist, dtype=np.float64).reshape(ns, K)
-    nbr = np.asarray(nbr, dtype=np.int64).reshape(ns, K)
-    scale = max(float(np.ptp(groots, axis=0).max()), 1e-12)
-    zero = dist <= 1e-12 * scale
-    with np.errstate(divide="ignore"):
-        w = np.where(zero.any(axis=1, keepdims=True), zero.astype(np.float64), 1.0 / np.maximum(dist, 1e-300))
-    # A guide follows itself only: slot 0 is itself with weight 1.
-    guide_of_strand = np.full(ns, -1, dtype=np.int64)
-    guide_of_strand[gidx] = np.arange(ng)
-    is_guide = guide_of_strand >= 0
-    gs = np.where(is_guide)[0]
-    g_self = guide_of_strand[gs]
-    # Move the guide itself to slot 0 (stable: the others keep their order); if it was not
-    # among its k nearest (several roots at one point), it replaces slot 0.
-    order = np.argsort(nbr[gs] != g_self[:, None], axis=1, kind="stable")
-    nbr[gs] = np.take_along_axis(nbr[gs], order, axis=1)
-    nbr[gs, 0] = g_self
-    w[is_guide] = 0.0
-    w[is_guide, 0] = 1.0
-    w /= w.sum(axis=1, keepdims=True)
-
-    # Arc-length correspondence: segment j of guide g holding fraction s, parameter u.
-    s_r, _ = _arc_fractions(P, counts)
-    f_g, _ = _arc_fractions(X, gcount)
-    gstrand_of = np.repeat(np.arange(ng), gcount)
-    keys = 2.0 * gstrand_of + f_g  # sorted: fractions lie in [0, 1] and strands are contiguous
-    g_v = nbr[strand_of]  # (V, K)
-    q = 2.0 * g_v + s_r[:, None]
-    j = np.searchsorted(keys, q, side="right") - 1
-    j = np.clip(j, gstart[g_v], gstart[g_v] + gcount[g_v] - 2)
-    fj, fj1 = f_g[j], f_g[j + 1]
-    u = np.clip((s_r[:, None] - fj) / (fj1 - fj), 0.0, 1.0)
-    # A guide's own vertices: edge = its own local index, u = 0 (u = 1 at the tip), exactly.
-    own = is_guide[strand_of]
-    if own.any():
-        g_own = guide_of_strand[strand_of[own]]
-        m_own = gcount[g_own]
-        jl = np.minimum(local[own], m_own - 2)
-        j[own, 0] = gstart[g_own] + jl
-        u[own, 0] = np.where(local[own] == m_own - 1, 1.0, 0.0)
-
-    # Rest frames of the guide edges (columns t, d1, d2).
-    if frame == "transport":
-        t = h["edge_rest_tangent"].astype(np.float64)
-        d1 = h["edge_rest_director"].astype(np.float64)
-        d2 = np.cross(t, d1)
-    else:
-        t, d1, d2 = (np.asarray(a, dtype=np.float64) for a in guide_rest_frames)
-    local_c = np.empty((nv, K, 3))
-    for k in range(K):
-        jk, uk = j[:, k], u[:, k][:, None]
-        o = (1.0 - uk) * X[jk] + uk * X[jk + 1]
-        d = P - o
-        local_c[:, k, 0] = np.einsum("ij,ij->i", d, t[jk])
-        local_c[:, k, 1] = np.einsum("ij,ij->i", d, d1[jk])
-        local_c[:, k, 2] = np.einsum("ij,ij->i", d, d2[jk])
-    if own.any():
-        local_c[own, 0] = 0.0  # exactly zero (it is, up to rounding of p - o)
-    return {
-        "render_strand_vertex_start": starts,
-        "render_strand_vertex_count": counts,
-        "render_vertex_rest_position": P,
-        "render_strand_guides": nbr,
-        "render_strand_weights": w,
-        "render_vertex_bind_edge": j,
-        "render_vertex_bind_param": u,
-        "render_vertex_bind_local": local_c,
-        "render_vertex_bind_weight": w[strand_of],
-    }
 
 
 # =========================================================================== fields

@@ -1,0 +1,214 @@
+"""Settings and argument checks of a grooming session (Daviet 2023, Sec. 5.3).
+
+:class:`GroomingConfig` (the session's parameters, validated; errors name the field), the action
+and parameter names of :class:`~taichi_hair.groom.session.GroomingSession`, the comb's body, and the
+checks of the actions' arguments (3-vectors, positive numbers, paths), which raise ``ValueError``
+naming the argument.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+
+MODES = ("replace", "add", "remove")
+#: Actions that change the groom or the simulation set-up: each pushes an undo snapshot.
+EDIT_ACTIONS = ("drag", "release", "comb", "trim", "scale_length", "scale_curl", "pin", "unpin", "set_parameter")
+#: Every action a session log may hold (each is a method of :class:`GroomingSession`).
+ACTIONS = ("select", "select_ray", "select_strands", "select_all", "simulate", "advance", "undo", "redo") \
+    + EDIT_ACTIONS
+#: Parameters whose change updates the Model and solver coefficients (the others apply to the running solver).
+REBUILD_PARAMETERS = ("youngs_modulus", "radius", "density", "guide_ratio", "neighbour_count", "seed", "contacts",
+                      "contact_margin", "w0")
+#: Of those, the ones that change the simulated layout (which strands are guides, the skinning
+#: slots, the contact pipeline): a new Model and solver are built and Taichi recompiles the kernels.
+#: The others update the Model in place (:meth:`Model.update`, no recompilation).
+LAYOUT_PARAMETERS = ("guide_ratio", "neighbour_count", "seed", "contacts", "contact_margin")
+#: Body of the comb in the guides' Model and Control (body 0 is the head, the identity).
+COMB_BODY = 1
+#: Most quasistatic steps one comb stroke may take (a longer path needs a larger ``step``).
+COMB_MAX_STEPS = 2000
+
+
+# =========================================================================== configuration
+def _finite(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass
+class GroomingConfig:
+    """Parameters of a :class:`GroomingSession` (validated; errors name the field).
+
+    Attributes:
+        youngs_modulus: Young modulus E of the hair, bending and stretching [Pa].
+        radius: strand radius R [m] (every strand; the groom's own radius attribute is kept, not simulated).
+        density: volumetric mass rho [kg/m^3].
+        friction: hair-hair Coulomb coefficient mu [-] (colliders keep their own ``friction``).
+        gravity: external acceleration g, 3 components [m/s^2].
+        iterations: ADMM iterations per frame [-] (10 in the paper).
+        guide_ratio: fraction of the strands simulated, in (0, 1] [-] (10 % in the paper); the
+            others follow their guides by linear blend skinning.
+        neighbour_count: guides each skinned strand follows [-].
+        seed: seed of the guide selection [-].
+        contacts: hair-hair proximity contacts on or off.
+        contact_margin: proximity margin of the contact detection [m].
+        w0: scale of the ADMM elasticity weights [-] (SolverADMMConfig.w0).  Measured on 12
+            strands x 10 vertices, 10 cm, 10 iterations per frame: 1 settles the sag to 3 % in 10
+            frames and holds a strand dragged by its tip still; 0.2 settles faster but a strand
+            with both ends kinematic keeps oscillating (centimetres) from frame to frame; 5 and
+            the dynamic default 25 creep (the sag is half done after 20 frames at 5).
+        autosave_every: write the autosave files every this many edits; 0 disables [-].
+        undo_limit: most undo snapshots kept [-].
+    """
+
+    youngs_modulus: float = 3.0e9
+    radius: float = 5.0e-5
+    density: float = 1300.0
+    friction: float = 0.2
+    gravity: tuple = (0.0, -9.81, 0.0)
+    iterations: int = 10
+    guide_ratio: float = 0.1
+    neighbour_count: int = 4
+    seed: int = 0
+    contacts: bool = True
+    contact_margin: float = 1.0e-4
+    w0: float = 1.0
+    autosave_every: int = 1
+    undo_limit: int = 100
+
+    def __post_init__(self):
+        for name in ("youngs_modulus", "radius", "density", "w0"):
+            v = getattr(self, name)
+            if not (_finite(v) and v > 0):
+                raise ValueError(f"GroomingConfig.{name} must be a finite positive number, got {v!r}")
+            setattr(self, name, float(v))
+        for name in ("friction", "contact_margin"):
+            v = getattr(self, name)
+            if not (_finite(v) and v >= 0):
+                raise ValueError(f"GroomingConfig.{name} must be a finite number >= 0, got {v!r}")
+            setattr(self, name, float(v))
+        try:
+            g = tuple(float(c) for c in self.gravity)
+        except (TypeError, ValueError):
+            g = ()
+        if len(g) != 3 or not all(math.isfinite(c) for c in g):
+            raise ValueError(f"GroomingConfig.gravity must be 3 finite numbers [m/s^2], got {self.gravity!r}")
+        self.gravity = g
+        for name, lo in (("iterations", 1), ("neighbour_count", 1), ("autosave_every", 0), ("undo_limit", 0),
+                         ("seed", 0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
+                raise ValueError(f"GroomingConfig.{name} must be an integer >= {lo}, got {v!r}")
+            setattr(self, name, int(v))
+        if not (_finite(self.guide_ratio) and 0.0 < self.guide_ratio <= 1.0):
+            raise ValueError(f"GroomingConfig.guide_ratio must lie in (0, 1], got {self.guide_ratio!r}")
+        self.guide_ratio = float(self.guide_ratio)
+        if not isinstance(self.contacts, (bool, np.bool_)):
+            raise ValueError(f"GroomingConfig.contacts must be true or false, got {self.contacts!r}")
+        self.contacts = bool(self.contacts)
+
+    def to_dict(self) -> dict:
+        """JSON-able dict of the fields (gravity as a list)."""
+        d = asdict(self)
+        d["gravity"] = list(self.gravity)
+        return d
+
+
+# =========================================================================== argument checks
+def _vec3(name: str, value) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"'{name}' must be 3 finite numbers, got {value!r}")
+    return a
+
+
+def _direction(name: str, value) -> tuple[np.ndarray, np.ndarray]:
+    """``(vector, unit vector)`` of 3 finite numbers, not all zero."""
+    v = _vec3(name, value)
+    n = np.linalg.norm(v)
+    if n == 0:
+        raise ValueError(f"'{name}' must be a non-zero vector")
+    return v, v / n
+
+
+def _positive(name: str, value, allow_zero: bool = False) -> float:
+    if not _finite(value) or value < 0 or (value == 0 and not allow_zero):
+        raise ValueError(f"'{name}' must be a finite {'non-negative' if allow_zero else 'positive'} number, "
+                         f"got {value!r}")
+    return float(value)
+
+
+def _path(name: str, value) -> np.ndarray:
+    """A polyline of at least 2 finite points (x, y, z) [m], float64 (m, 3)."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.zeros((0, 0))
+    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] < 2:
+        text = repr(value)
+        raise ValueError(f"'{name}' must be a list of at least 2 points [x, y, z] [m], got "
+                         f"{text if len(text) <= 80 else text[:77] + '...'}")
+    bad = np.nonzero(~np.all(np.isfinite(a), axis=1))[0]
+    if bad.size:
+        raise ValueError(f"'{name}' has a non-finite coordinate at point {int(bad[0])}: {a[bad[0]].tolist()}")
+    return a
+
+
+# =========================================================================== the session's inputs
+def session_groom(groom):
+    """The groom a session edits: a copy of ``groom`` (a :class:`taichi_hair.io.Groom`, or a list
+    of (m, 3) polylines [m]) with a rest pose (``points`` if it has none) and pins (none), without
+    ``point_frames`` (an animation cache).  Raises for a strand of fewer than 3 vertices."""
+    from ..io import Groom
+
+    if not isinstance(groom, Groom):
+        groom = Groom.from_polylines([np.asarray(p, dtype=np.float64) for p in groom], units="m")
+    g = groom.copy().validate()
+    g.point_frames = None
+    g.frame_times = None
+    if g.rest_points is None:
+        g.rest_points = g.points.copy()
+    if g.pinned is None:
+        g.pinned = np.zeros(g.vertex_count, dtype=bool)
+    counts = g.strand_vertex_counts()
+    short = np.nonzero(counts < 3)[0]
+    if short.size:
+        raise ValueError(f"GroomingSession: strand {int(short[0])} has {int(counts[short[0]])} vertices; "
+                         "a simulated strand needs at least 3")
+    return g
+
+
+def session_config(groom, config: GroomingConfig | None) -> GroomingConfig:
+    """``config`` checked, or the groom's ``params["grooming"]`` (as a session saves it), or the defaults."""
+    if config is None:
+        stored = groom.params.get("grooming")
+        try:
+            config = GroomingConfig(**stored) if isinstance(stored, dict) else GroomingConfig()
+        except TypeError as exc:
+            raise ValueError(f"GroomingSession: params['grooming'] of the groom: {exc}") from None
+    elif not isinstance(config, GroomingConfig):
+        raise ValueError(f"GroomingSession: config must be a GroomingConfig, got {type(config).__name__}")
+    return config
+
+
+def session_colliders(colliders) -> list:
+    """The scene colliders as a list, checked to be on the static world (-1) or the head (0)."""
+    out = list(colliders) if colliders else []
+    for k, c in enumerate(out):
+        if getattr(c, "body", -1) not in (-1, 0):
+            raise ValueError(f"GroomingSession: collider {k} is on body {c.body}; a grooming session has the "
+                             f"static world (-1) and the head (0) only (body {COMB_BODY} is the comb's)")
+    return out
+
+
+def with_parameter(config: GroomingConfig, name, value) -> GroomingConfig:
+    """A copy of ``config`` with the field ``name`` set to ``value`` (validated; errors name the field)."""
+    names = [f.name for f in fields(GroomingConfig)]
+    if name not in names:
+        raise ValueError(f"set_parameter: unknown parameter {name!r}; known: {', '.join(names)}")
+    return replace(config, **{name: value})  # __post_init__ validates

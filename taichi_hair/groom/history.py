@@ -1,0 +1,174 @@
+"""Undo/redo history and the session log of a grooming session (Daviet 2023, Sec. 5.3).
+
+* :class:`History`: the undo and redo stacks of snapshots (the groom, the parameters, the
+  selection, the drag and the simulation switch, as :func:`snapshot` takes them), with a limit;
+* :func:`what_changed`: how much of the simulation a restored snapshot invalidates;
+* the log: :func:`write_log` (``session.json``, one action per line, atomically),
+  :func:`parse_log` (entries with their line numbers) and :func:`check_entry` (the checks of
+  :meth:`~taichi_hair.groom.session.GroomingSession.replay`), and the autosave file names.
+
+Nothing here holds the session: the session passes what is needed and applies what comes back.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import replace
+
+import numpy as np
+
+from .config import LAYOUT_PARAMETERS, REBUILD_PARAMETERS
+
+
+# =========================================================================== snapshots, undo and redo
+def copy_drag(drag: dict | None) -> dict | None:
+    """A deep copy of a drag state (its arrays copied), None for None."""
+    return None if drag is None else {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in drag.items()}
+
+
+def snapshot(groom, config, selection: np.ndarray, drag: dict | None, simulating: bool) -> dict:
+    """Everything an undo restores, copied."""
+    return {"groom": groom.copy(), "config": replace(config), "selection": selection.copy(),
+            "drag": copy_drag(drag), "simulating": simulating}
+
+
+def what_changed(old_groom, old_config, groom, config) -> tuple[bool, bool]:
+    """``(same_layout, same_rest)`` between the groom and config before and after a restore:
+    ``same_layout`` the same strands, roots and layout parameters (the Model can be updated in
+    place); ``same_rest`` also the same rest pose (bit for bit, same dtype) and Model parameters
+    (nothing to update)."""
+    same_layout = (np.array_equal(old_groom.strand_offsets, groom.strand_offsets)
+                   and np.array_equal(old_groom.rest_points[old_groom.strand_offsets[:-1]],
+                                      groom.rest_points[groom.strand_offsets[:-1]])
+                   and all(getattr(old_config, k) == getattr(config, k) for k in LAYOUT_PARAMETERS))
+    same_rest = (same_layout and old_groom.rest_points.dtype == groom.rest_points.dtype
+                 and np.array_equal(old_groom.rest_points, groom.rest_points)
+                 and all(getattr(old_config, k) == getattr(config, k) for k in REBUILD_PARAMETERS))
+    return same_layout, same_rest
+
+
+class History:
+    """Undo and redo stacks of snapshots (dicts of :func:`snapshot`).
+
+    Attributes:
+        undo_stack: snapshots taken before each edit, oldest first.
+        redo_stack: snapshots of the states undone, most recently undone last.
+    """
+
+    def __init__(self):
+        self.undo_stack: list[dict] = []
+        self.redo_stack: list[dict] = []
+
+    def push(self, snap: dict, limit: int) -> None:
+        """Record the state before a new edit (at most ``limit`` kept, the oldest dropped); clears redo."""
+        self.undo_stack.append(snap)
+        if len(self.undo_stack) > limit:
+            del self.undo_stack[: len(self.undo_stack) - limit]
+        self.redo_stack.clear()
+
+    def undo(self, current: dict) -> dict:
+        """The snapshot to restore for an undo; ``current`` (the state now) goes on the redo stack."""
+        if not self.undo_stack:
+            raise ValueError("undo: nothing to undo")
+        self.redo_stack.append(current)
+        return self.undo_stack.pop()
+
+    def redo(self, current: dict) -> dict:
+        """The snapshot to restore for a redo; ``current`` goes back on the undo stack."""
+        if not self.redo_stack:
+            raise ValueError("redo: nothing to redo")
+        self.undo_stack.append(current)
+        return self.redo_stack.pop()
+
+    @property
+    def can_undo(self) -> bool:
+        return bool(self.undo_stack)
+
+    @property
+    def can_redo(self) -> bool:
+        return bool(self.redo_stack)
+
+
+# =========================================================================== the session log
+def _strip_groom_ext(path: str) -> str:
+    for ext in (".thair.npz", ".npz"):
+        if path.lower().endswith(ext):
+            return path[: -len(ext)]
+    return os.path.splitext(path)[0]
+
+
+def autosave_path_for(groom_path) -> str:
+    """``<stem>.autosave.thair.npz`` beside a groom file."""
+    return _strip_groom_ext(os.fspath(groom_path)) + ".autosave.thair.npz"
+
+
+def autosave_log_path(autosave_path: str | None) -> str | None:
+    """The log beside an autosave file (``<name>.session.json``), None for None."""
+    if autosave_path is None:
+        return None
+    base = autosave_path
+    for ext in (".thair.npz", ".npz"):
+        if base.lower().endswith(ext):
+            base = base[: -len(ext)]
+            break
+    return base + ".session.json"
+
+
+def write_log(entries: list, path) -> None:
+    """Write ``entries`` as a JSON list, one action per line (line i + 2 holds entry i), atomically."""
+    path = os.fspath(path)
+    text = "[\n" + ",\n".join(json.dumps(e, allow_nan=False) for e in entries) + "\n]\n"
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".json", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def parse_log(source) -> list:
+    """Entries of a session log (a list, or a JSON file) as (entry, line or None)."""
+    if isinstance(source, (list, tuple)):
+        return [(e, None) for e in source]
+    path = os.fspath(source)
+    with open(path, "r", encoding="utf-8") as fh:
+        text = fh.read()
+    dec = json.JSONDecoder()
+    pos = len(text) - len(text.lstrip())
+    if not text[pos:pos + 1] == "[":
+        raise ValueError(f"{path}: line {text.count(chr(10), 0, pos) + 1}: a session log is a JSON list")
+    pos += 1
+    out = []
+    while True:
+        while pos < len(text) and text[pos] in " \t\r\n,":
+            pos += 1
+        line = text.count("\n", 0, pos) + 1
+        if pos >= len(text):
+            raise ValueError(f"{path}: line {line}: unterminated JSON list")
+        if text[pos] == "]":
+            return out
+        try:
+            entry, pos = dec.raw_decode(text, pos)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: line {exc.lineno}, entry {len(out)}: invalid JSON ({exc.msg})") from None
+        out.append((entry, line))
+
+
+def check_entry(index: int, entry, line, actions) -> tuple[str, str, dict]:
+    """``(where, action, params)`` of log entry ``index`` (``where`` names the entry and its line
+    for error messages); raises ValueError for a non-object or an action not in ``actions``."""
+    where = f"session entry {index}" + (f" (line {line})" if line is not None else "")
+    if not isinstance(entry, dict) or "action" not in entry:
+        raise ValueError(f"{where}: expected an object with an 'action' key, got {entry!r}")
+    name = entry["action"]
+    if name not in actions:
+        raise ValueError(f"{where}: unknown action {name!r}; known: {', '.join(actions)}")
+    return where, name, {k: v for k, v in entry.items() if k != "action"}

@@ -1,0 +1,221 @@
+"""The live quasistatic simulation of a grooming session's guides (Daviet 2023, Sec. 5.3).
+
+:class:`GuideSimulation` owns the guides' :class:`Model`, the :class:`SolverADMM` in
+``mode="quasistatic"`` with proximity-only contacts, the State and Control, and the
+:class:`SkinningLBS` of the other strands.  It is given the groom, the config and the guide strands
+as arguments and returns positions; it never calls the session.
+
+Rest-pose changes (trim, scale_length, scale_curl, comb, undo/redo across them) and
+material parameters (youngs_modulus, radius, density, w0) update the Model in
+place, *lazily* at the next frame (a burst of edits costs one update):
+:meth:`Model.update` with the host arrays a :class:`GroomBuilder` computes for
+the new rest shapes, ``SolverADMM.refresh_model`` and ``SkinningLBS.rebind``,
+all into the fields that exist already, so Taichi compiles nothing again.  The
+frames after an in-place update are bit for bit those of a new session opened
+on the edited groom (tested).  The guides' Model has two bodies (the head and the comb) and the
+solver always has a contact pipeline (hair-hair contacts as configured, the scene colliders and the
+idle comb), so the comb never needs a new Model either.  Only parameters that change which strands are
+simulated or the contact set-up (``LAYOUT_PARAMETERS``: guide_ratio,
+neighbour_count, seed, contacts, contact_margin) build a new Model and solver,
+and then Taichi recompiles every kernel (kernels are specialised per field;
+measured 8-185 s for the first frame on the shared 2-core CPU before in-place
+updates existed, 15-25 s with a warm offline cache).  ``session.timings``
+records builds (``rebuild``), in-place updates (``update``) and frames.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import COMB_BODY
+
+
+def _host_of(builder) -> tuple[dict, list]:
+    """``(host, materials)`` that ``builder.finalize()`` would give its Model, without allocating
+    the Model's Taichi fields (allocating them would make Taichi compile the kernels again).
+
+    GroomBuilder has no host-only finalize; this calls ``finalize`` with the module's ``Model``
+    class swapped for a capture for the duration of the call (single-threaded use only).
+    """
+    from .. import builder as builder_module
+
+    class _Captured(Exception):
+        pass
+
+    def capture(host, materials, body_count):
+        raise _Captured(host, materials)
+
+    saved = builder_module.Model
+    builder_module.Model = capture
+    try:
+        builder.finalize()
+    except _Captured as got:
+        return got.args[0], got.args[1]
+    finally:
+        builder_module.Model = saved
+    raise RuntimeError("GroomBuilder.finalize returned without building its Model")
+
+
+def guide_setup(groom, config, guides: np.ndarray):
+    """The guides' rest vertices (float64, flat) and offsets, and the material of ``config``."""
+    from ..config import RodMaterial
+
+    g, cfg = groom, config
+    off = g.strand_offsets
+    counts = g.strand_vertex_counts()[guides]
+    starts = off[guides]
+    # Vertex indices of the guides, strand after strand (vectorised: no per-strand slices).
+    rows = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum())
+    points = g.rest_points[rows].astype(np.float64)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    material = RodMaterial(radius=cfg.radius, density=cfg.density, youngs_modulus_bend=cfg.youngs_modulus,
+                           youngs_modulus_stretch=cfg.youngs_modulus)
+    return (points, offsets), material
+
+
+def guide_builder(guide_rest, material):
+    """The guides' GroomBuilder (bulk :meth:`GroomBuilder.add_strands`): roots clamped to body 0
+    (the head); two bodies, the second the comb's (``COMB_BODY``), so a comb stroke needs no new
+    Model."""
+    from ..builder import GroomBuilder
+
+    builder = GroomBuilder(body_count=COMB_BODY + 1)
+    builder.add_strands(guide_rest[0], guide_rest[1], material, root="clamped", body=0)
+    return builder
+
+
+class GuideSimulation:
+    """The guides of a groom in a quasistatic ADMM simulation, with the skinning of the others.
+
+    Args:
+        groom: the :class:`taichi_hair.io.Groom` (its rest pose builds the Model).
+        config: the session's :class:`~taichi_hair.groom.config.GroomingConfig`.
+        guides: sorted int64 indices of the simulated strands.
+        colliders: the scene's body colliders (the comb is added after them).
+
+    Attributes:
+        model, solver, state, control: the guides' Model, SolverADMM, State and Control.
+        skin: the :class:`SkinningLBS` of every strand, or None when every strand is a guide.
+        comb_collider: index of the comb in the solver's ColliderSet [-].
+        guide_vertex: groom vertex of each Model vertex, int64 (guide vertex count,).
+        row_of: Model vertex of each groom vertex, -1 off the guides, int64 (vertex_count,).
+        stale: the rest shapes or materials changed; :meth:`update` before the next step.
+        base_fixed, base_body: ``vertex_is_fixed`` and ``vertex_body_position`` of the Model
+            without pins and drag (clamped roots only).
+        body: the prescribed positions uploaded last [m], float64 (guide vertex count, 3).
+        drag_rows: Model vertices of the drag, int64.
+        np_float: NumPy dtype of Taichi's ``default_fp``.
+    """
+
+    def __init__(self, groom, config, guides: np.ndarray, colliders):
+        from ..contact.colliders import CapsuleCollider
+        from ..config import ContactConfig, SolverADMMConfig
+        from ..model import _np_float
+        from .skinning import SkinningConfig, SkinningLBS
+        from ..solver_admm import SolverADMM
+
+        g, cfg = groom, config
+        off = g.strand_offsets
+        guide_rest, material = guide_setup(g, cfg, guides)
+        model = guide_builder(guide_rest, material).finalize()
+        # Proximity only (Sec. 5.3): no velocity-dependent margin growth.  The pipeline always exists:
+        # it holds the comb, an idle collider on its own body until a stroke enables it.
+        contacts = ContactConfig(hair_hair=cfg.contacts, friction=cfg.friction, margin=cfg.contact_margin,
+                                 velocity_margin=0.0)
+        comb = CapsuleCollider(p0=(0.0, 0.0, 0.0), p1=(0.0, 0.0, 0.0), radius=1.0e-3, friction=0.0, body=COMB_BODY,
+                               strands=(0, 1))
+        solver = SolverADMM(model, SolverADMMConfig(iterations=cfg.iterations, mode="quasistatic", w0=cfg.w0,
+                                                    contacts=contacts), colliders=list(colliders) + [comb])
+        solver.contacts.colliders.collider_strands[len(colliders)] = [0, 0]  # idle: acts on no strand
+        state = model.state()
+        control = model.control()
+        control.gravity = tuple(cfg.gravity)
+        skin = None
+        if guides.size < g.strand_count:
+            rest = g.rest_points.astype(np.float64)
+            polylines = [rest[off[s]:off[s + 1]] for s in range(g.strand_count)]
+            skin = SkinningLBS(model, guides, polylines,
+                               SkinningConfig(neighbour_count=min(cfg.neighbour_count, int(guides.size))),
+                               strand_body=0)
+        guide_vertex = np.concatenate([np.arange(off[s], off[s + 1]) for s in guides])
+        row_of = np.full(g.vertex_count, -1, dtype=np.int64)
+        row_of[guide_vertex] = np.arange(guide_vertex.size)
+        self.model, self.solver, self.state, self.control, self.skin = model, solver, state, control, skin
+        self.comb_collider = len(colliders)
+        self.guide_vertex, self.row_of, self.stale = guide_vertex, row_of, False
+        self.base_fixed = model.host["vertex_is_fixed"].copy()
+        self.base_body = model.host["vertex_body_position"].copy()
+        self.body = None
+        self.drag_rows = np.zeros(0, dtype=np.int64)
+        self.np_float = _np_float()
+
+    def update(self, groom, config, guides: np.ndarray) -> None:
+        """New rest shapes and materials, same layout: :meth:`Model.update`, ``refresh_model`` and a
+        new skinning binding, all into the existing Taichi fields (no new field, no recompilation).
+        The State is not touched: load it again (:meth:`load_positions`)."""
+        g, cfg = groom, config
+        guide_rest, material = guide_setup(g, cfg, guides)
+        host, materials = _host_of(guide_builder(guide_rest, material))
+        self.model.update(host, materials)
+        self.solver.config.w0 = cfg.w0
+        self.solver.refresh_model()
+        if self.skin is not None:
+            rest = g.rest_points.astype(np.float64)
+            off = g.strand_offsets
+            self.skin.rebind([rest[off[s]:off[s + 1]] for s in range(g.strand_count)])
+        self.base_fixed = host["vertex_is_fixed"].copy()
+        self.base_body = host["vertex_body_position"].copy()
+        self.stale = False
+
+    def apply_live_parameters(self, config) -> None:
+        """Gravity, iterations and friction of ``config`` into the running solver."""
+        self.control.gravity = tuple(config.gravity)
+        self.solver.config.iterations = config.iterations
+        if self.solver.contacts is not None:
+            self.solver.contacts.config.friction = config.friction
+
+    def load_positions(self, points: np.ndarray) -> None:
+        """State from the groom's current pose ``points`` (vertex_count, 3) [m]: rest frames and
+        twists, current positions; fresh multipliers."""
+        self.model.reset_state(self.state)
+        self.state.vertex_position.from_numpy(points[self.guide_vertex].astype(self.np_float))
+        self.solver.reset_duals()
+
+    def set_kinematics(self, pinned=None, pinned_positions=None, drag_vertices=None, drag_position=None) -> None:
+        """Write vertex_is_fixed / vertex_body_position: clamped roots, the pinned groom vertices
+        ``pinned`` (guide vertices) at ``pinned_positions`` [m], and the drag (groom vertices
+        ``drag_vertices`` at ``drag_position`` [m]).  Body 0 stays the identity."""
+        fixed = self.base_fixed.copy()
+        body = self.base_body.copy()
+        if pinned is not None:
+            rows = self.row_of[pinned]
+            fixed[rows] = 1
+            body[rows] = pinned_positions.astype(np.float64)
+        self.drag_rows = np.zeros(0, dtype=np.int64)
+        if drag_vertices is not None:
+            self.drag_rows = self.row_of[drag_vertices]
+            fixed[self.drag_rows] = 1
+            body[self.drag_rows] = drag_position
+        self.body = body
+        self.model.vertex_is_fixed.from_numpy(fixed.astype(np.int32))
+        self.model.vertex_body_position.from_numpy(body.astype(self.np_float))
+
+    def step(self, drag_position=None) -> None:
+        """One quasistatic step (``config.iterations`` ADMM iterations); ``drag_position`` [m], if
+        given, are the drag's new prescribed positions (the rows of :meth:`set_kinematics`)."""
+        if drag_position is not None:
+            self.body[self.drag_rows] = drag_position
+            self.model.vertex_body_position.from_numpy(self.body.astype(self.np_float))
+        self.solver.step(self.state, self.control, 1.0)
+
+    def positions(self, points: np.ndarray) -> np.ndarray:
+        """A new current pose: the simulated guides (State) and the skinned strands, in the dtype of
+        ``points`` (the groom's pose, kept where nothing is simulated)."""
+        x = self.state.vertex_position.to_numpy()
+        if self.skin is not None:
+            self.skin.deform(self.state, self.control)
+            pts = self.skin.positions().astype(points.dtype)
+        else:
+            pts = points.copy()
+        pts[self.guide_vertex] = x.astype(pts.dtype)
+        return pts
