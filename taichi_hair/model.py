@@ -1,9 +1,14 @@
 """Model: everything about the groom that does not change in time.
 
 A :class:`Model` is made by :meth:`GroomBuilder.finalize`.  It owns the static
-field groups of :mod:`taichi_hair.fields` (flattened into attributes, so a
-kernel can take the model once for all of them) and NumPy copies of the same
-arrays for host-side set-up (``model.host``).
+field groups of :mod:`taichi_hair.fields`, one member per data role --
+``model.vertex`` (:class:`VertexInfo`), ``model.edge`` (:class:`EdgeInfo`),
+``model.pair`` (:class:`PairInfo`), ``model.strand`` (:class:`StrandInfo`) --
+passed to kernels by role (``admm.begin_step(dyn, bdf2, m.vertex, m.edge, ...)``,
+so a call site shows what a kernel reads), and NumPy copies of the same arrays for
+host-side set-up (``model.host``).  Every field is also an attribute of the Model
+itself (``model.vertex_mass is model.vertex.vertex_mass``), for host code and for
+the kernels that take the whole Model.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from .frames import update_reference_frames
 from .state import Control, State
 
 
-class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
+class Model:
     """Static description of a groom (see :mod:`taichi_hair.fields` for every field).
 
     Attributes:
@@ -35,10 +40,14 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
         self.body_count = body_count
         self.host = host
         self.materials = materials
-        VertexInfo.__init__(self, n)
-        EdgeInfo.__init__(self, n)
-        PairInfo.__init__(self, n)
-        StrandInfo.__init__(self, ns)
+        #: Static data by role (see the module docstring).
+        self.vertex = VertexInfo(n)
+        self.edge = EdgeInfo(n)
+        self.pair = PairInfo(n)
+        self.strand = StrandInfo(ns)
+        for role in (self.vertex, self.edge, self.pair, self.strand):
+            for name, field in vars(role).items():
+                setattr(self, name, field)
         self._upload(host)
         #: Identity body transforms, used to build the rest state.
         self._rest_rotation = ti.Matrix.field(3, 3, float, body_count)
@@ -81,7 +90,7 @@ class Model(VertexInfo, EdgeInfo, PairInfo, StrandInfo):
         state.edge_angular_velocity.fill(0.0)
         state.edge_tangent.from_numpy(self.host["edge_rest_tangent"].astype(_np_float()))
         state.edge_reference_director.copy_from(self.edge_rest_director)
-        update_reference_frames(True, self, self, self, self, self._rest_rotation, state.vertex_position,
+        update_reference_frames(True, self.vertex, self.edge, self.pair, self.strand, self._rest_rotation, state.vertex_position,
                                 state.edge_twist, state)
 
     # ------------------------------------------------------------------ factories

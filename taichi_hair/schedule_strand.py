@@ -93,38 +93,39 @@ def admm_iterations_strand(
             # (a, c) Local elasticity solve and fused dual update, every pair of the strand.
             for k in range(m):
                 i = start + k
-                local_elasticity_at(i, measure, use_q, model, model, model, model, body_rotation, x, theta,
+                local_elasticity_at(i, measure, use_q, model.vertex, model.edge, model.pair, model.strand,
+                                    body_rotation, x, theta,
                                     es, buf, damping_scale, weight_floor)
             # (d) Global step: assemble (reads pair forces i-1, i, i+1), solve, update.
             for k in range(m):
                 i = start + k
-                assemble_position_at(i, dynamic, model, model, model, x, buf, gravity, air_velocity,
+                assemble_position_at(i, dynamic, model.vertex, model.edge, model.pair, x, buf, gravity, air_velocity,
                                      air_viscosity, dt, weight_floor)
             thomas_strand(start, m, buf.tri_lower, buf.tri_diag, buf.tri_upper, buf.tri_rhs3)
             for k in range(m):
                 i = start + k
-                apply_position_update_at(i, model, x, buf)
+                apply_position_update_at(i, model.vertex, x, buf)
             # (e) Frames: every edge's tangent first, then the reference twists.
             for k in range(m):
                 i = start + k
-                reference_frame_at(i, model, model, model, body_rotation, x, theta, es)
+                reference_frame_at(i, model.vertex, model.edge, model.strand, body_rotation, x, theta, es)
             if ti.static(with_reference_twist):
                 for k in range(m):
                     i = start + k
-                    reference_twist_at(i, model, es)
+                    reference_twist_at(i, model.pair, es)
             if ti.static(twist_free):
                 # (f, g) replaced: the exact twist of a naturally straight round rod (none).
-                twist_free_strand(start, m, model, theta, es, False)
+                twist_free_strand(start, m, model.edge, theta, es, False)
             else:
                 # (f) Twist Newton step.
                 for k in range(m):
                     i = start + k
-                    pair_twist_terms_at(i, measure, model, model, model, theta, es, buf, damping_scale)
+                    pair_twist_terms_at(i, measure, model.vertex, model.pair, model.strand, theta, es, buf, damping_scale)
                 for k in range(m):
                     i = start + k
-                    assemble_twist_at(i, dynamic, model, model, theta, buf, dt)
+                    assemble_twist_at(i, dynamic, model.edge, model.pair, theta, buf, dt)
                 thomas_strand(start, m, buf.tri_lower, buf.tri_diag, buf.tri_upper, buf.tri_rhs1)
                 # (g) theta += dtheta, material frames.
                 for k in range(m):
                     i = start + k
-                    material_frame_at(i, model, theta, es, buf.tri_rhs1)
+                    material_frame_at(i, model.edge, theta, es, buf.tri_rhs1)

@@ -173,7 +173,7 @@ class SolverADMM(SolverBase):
         f = _np_float()
         m.reset_state(self._rest_state)
         rest = self._rest_state
-        admm.compute_strains(self.measure, m, m, rest.vertex_position, rest.edge_twist, rest,
+        admm.compute_strains(self.measure, m.edge, m.pair, rest.vertex_position, rest.edge_twist, rest,
                              self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
         # Model no more than the scene needs (frames.twist_choice): the twist unknowns of straight round rods.
         if cfg.twist == "solve":
@@ -243,11 +243,12 @@ class SolverADMM(SolverBase):
             con.detect(state, dt, control.gravity, dyn)
             t0 = self._tock("detection", t0)
         # Begin-of-step strains for strain-rate damping (Sec. 4.4), then advect (Alg. 1 l.2).
-        admm.compute_strains(self.measure, m, m, state.vertex_position, state.edge_twist, state,
+        admm.compute_strains(self.measure, m.edge, m.pair, state.vertex_position, state.edge_twist, state,
                              b.pair_kappa_begin, b.edge_strain_begin)
         if bdf2_run:
             admm.bdf2_strain_origin(bdf2, b)
-        admm.begin_step(dyn, bdf2, m, m, control.body_rotation, control.body_translation, m, state, state, b, h)
+        admm.begin_step(dyn, bdf2, m.vertex, m.edge, control.body_rotation, control.body_translation, m.strand, state, state,
+                        b, h)
         if not cfg.warm_start_duals:
             admm.reset_duals(b)
         t0 = self._tock("begin", t0)
@@ -291,7 +292,7 @@ class SolverADMM(SolverBase):
             t0 = self._tock("correction", t0)
         if self.twist_free:
             # theta of the twist-free frames, once per step (the iterations only need the frames).
-            update_twist_free_frames(m, m, state.edge_twist, state, True)
+            update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, True)
         admm.end_step(dyn, state, state, b, h)
         self.step_count += 1
         if cfg.check_finite:
@@ -317,7 +318,7 @@ class SolverADMM(SolverBase):
                 con.detect_continuous(b.vertex_position_begin, state.vertex_position)
                 t0 = self._tock("continuous", t0)
             # (a) Local elasticity solve over y (Sec. 4.4).
-            solve_local_elasticity(self.measure, self.use_q, m, m, m, m, control.body_rotation,
+            solve_local_elasticity(self.measure, self.use_q, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
                                    state.vertex_position, state.edge_twist, state, b, damping_scale,
                                    self._weight_floor)
             t0 = self._tock("local", t0)
@@ -327,24 +328,26 @@ class SolverADMM(SolverBase):
                 t0 = self._tock("projection", t0)
             # (c) The dual update lambda_y += y - Bx is fused into the local step.
             # (d, e) Global tridiagonal solve over x (Sec. 4.3), then frames.
-            admm.assemble_position_system(dyn, m, m, m, state.vertex_position, b, g, v_air, cfg.air_viscosity, dt,
+            admm.assemble_position_system(dyn, m.vertex, m.edge, m.pair, state.vertex_position, b, g, v_air,
+                                          cfg.air_viscosity, dt,
                                           self._weight_floor)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
-            admm.apply_position_update(m, state.vertex_position, b)
+            admm.apply_position_update(m.vertex, state.vertex_position, b)
             t0 = self._tock("global", t0)
-            update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
+            update_reference_frames(self.with_ref_twist, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
+                                    state.vertex_position,
                                     state.edge_twist, state)
             t0 = self._tock("frames", t0)
             if self.twist_free:
                 # (f, g) replaced by the twist of a naturally straight round rod: none (frames.twist_choice).
-                update_twist_free_frames(m, m, state.edge_twist, state, False)
+                update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, False)
             else:
                 # (f, g) Twist Newton step, then material frames.
-                admm.compute_pair_twist_terms(self.measure, m, m, m, state.edge_twist, state, b, damping_scale)
-                admm.assemble_twist_system(dyn, m, m, state.edge_twist, b, dt)
+                admm.compute_pair_twist_terms(self.measure, m.vertex, m.pair, m.strand, state.edge_twist, state, b, damping_scale)
+                admm.assemble_twist_system(dyn, m.edge, m.pair, state.edge_twist, b, dt)
                 self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs1)
                 t0 = self._tock("twist", t0)
-                update_material_frames(m, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
+                update_material_frames(m.edge, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
             t0 = self._tock("frames", t0)
             self.iteration_count += 1
         return t0
@@ -353,10 +356,11 @@ class SolverADMM(SolverBase):
         """Reference (and material) frames after x changed outside the iterations; the twist-free
         frames too when the twist unknowns are dropped."""
         m = self.model
-        update_reference_frames(self.with_ref_twist, m, m, m, m, control.body_rotation, state.vertex_position,
+        update_reference_frames(self.with_ref_twist, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
+                                state.vertex_position,
                                 state.edge_twist, state)
         if self.twist_free:
-            update_twist_free_frames(m, m, state.edge_twist, state, False)
+            update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, False)
 
     def model_report(self) -> dict:
         """What the solver modelled and skipped so far, in words, by topic (README, "Model no more than a scene needs")."""
@@ -385,12 +389,13 @@ class SolverADMM(SolverBase):
         return rep
 
     def _non_finite_code(self, state: State) -> int:
-        admm.find_non_finite(self.model, state, state, self._bad)
+        admm.find_non_finite(self.model.vertex, state, state, self._bad)
         return int(self._bad[None])
 
     def _restore_begin(self, state: State) -> None:
         admm.restore_begin(state, state, self.buf)
-        update_reference_frames(True, self.model, self.model, self.model, self.model, self.model._rest_rotation,
+        update_reference_frames(True, self.model.vertex, self.model.edge, self.model.pair, self.model.strand,
+                                self.model._rest_rotation,
                                 state.vertex_position, state.edge_twist, state)
 
     def reset_duals(self) -> None:
@@ -466,7 +471,7 @@ class SolverADMM(SolverBase):
         """
         m, b = self.model, self.buf
         kappa, eps = self._diag_kappa, self._diag_strain
-        admm.compute_strains(self.measure, m, m, state.vertex_position, state.edge_twist, state, kappa, eps)
+        admm.compute_strains(self.measure, m.edge, m.pair, state.vertex_position, state.edge_twist, state, kappa, eps)
         k = kappa.to_numpy().astype(np.float64)
         rk = b.pair_rest_kappa.to_numpy().astype(np.float64)
         kb = b.pair_bend_stiffness.to_numpy().astype(np.float64)

@@ -267,10 +267,10 @@ class SkinningLBS:
         ``fields.render_vertex_position``; allocates nothing."""
         m, sk = self.guide_model, self.fields
         if self.config.frame == "transport":
-            compute_guide_frames_transport(m, m, control.body_rotation, guide_state.vertex_position,
+            compute_guide_frames_transport(m.vertex, m.strand, control.body_rotation, guide_state.vertex_position,
                                            sk.guide_edge_frame)
         else:
-            compute_guide_frames_material(m, guide_state, sk.guide_edge_frame)
+            compute_guide_frames_material(m.edge, guide_state, sk.guide_edge_frame)
         apply_skinning(sk, self.neighbour_count, guide_state.vertex_position, control.body_rotation,
                        control.body_translation, sk.render_vertex_position)
 

@@ -337,24 +337,26 @@ class SolverXPBD(SolverBase):
         v_air = vec3(*control.air_velocity)
         damping = 1.0 / dts  # gamma = tau / dt_s, tau stored per constraint
         decay = math.exp(-cfg.damping * dts)
-        xc.begin_step(m, m, m, control.body_rotation, control.body_translation, state, state, b)
+        xc.begin_step(m.vertex, m.edge, m.strand, control.body_rotation, control.body_translation, state, state, b)
         if self.schedule == "strand":
-            xc.substeps_strand(m, m, m, m, state, b, g, v_air, cfg.air_viscosity, dts, dts * dts, n_sub,
+            xc.substeps_strand(m.vertex, m.edge, m.pair, m.strand, state, b, g, v_air, cfg.air_viscosity, dts, dts * dts, n_sub,
                                cfg.iterations, damping, decay)
         for k in range(n_sub if self.schedule == "stage" else 0):
             fraction = (k + 1) / n_sub
             if cfg.iterations <= _FUSED_ITERATIONS:
                 # (a-c) in one launch, the sweeps unrolled.
-                xc.substep(cfg.iterations, m, m, m, state, b, g, v_air, cfg.air_viscosity, dts, fraction, damping,
+                xc.substep(cfg.iterations, m.vertex, m.edge, m.pair, state, b, g, v_air, cfg.air_viscosity, dts,
+                           fraction, damping,
                            decay)
             else:
-                xc.predict(m, m, m, state, b, g, v_air, cfg.air_viscosity, dts, fraction)
+                xc.predict(m.vertex, m.edge, m.pair, state, b, g, v_air, cfg.air_viscosity, dts, fraction)
                 for _ in range(cfg.iterations):
-                    xc.solve_constraints(m, m, m, state.vertex_position, b, dts * dts, damping)
-                xc.update_velocities(m, state, b, dts, decay)
-        update_reference_frames(True, m, m, m, m, control.body_rotation, state.vertex_position, state.edge_twist,
+                    xc.solve_constraints(m.vertex, m.edge, m.pair, state.vertex_position, b, dts * dts, damping)
+                xc.update_velocities(m.edge, state, b, dts, decay)
+        update_reference_frames(True, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
+                                state.vertex_position, state.edge_twist,
                                 state)
-        xc.write_twists(m, state, b)
+        xc.write_twists(m.edge, state, b)
         self.step_count += 1
         self.vertex_iteration_count += m.vertex_count * n_sub * cfg.iterations
         self._tock("substeps", t0)
@@ -362,7 +364,7 @@ class SolverXPBD(SolverBase):
             self.check_finite(state)
 
     def _non_finite_code(self, state: State) -> int:
-        find_non_finite(self.model, state, state, self._bad)
+        find_non_finite(self.model.vertex, state, state, self._bad)
         return int(self._bad[None])
 
     def _restore_begin(self, state: State) -> None:
