@@ -8,20 +8,33 @@ W0_B ("admm_w1") instead of the study's 25 and 1, and prints the summary and eve
 study itself (``taichi-hair bench stability``) keeps its two rows.
 """
 
-import os
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-import taichi as ti  # noqa: E402
 
-ti.init(arch=ti.cpu, log_level=ti.WARN)
-from taichi_hair.bench import stability as S  # noqa: E402
+def run(w0_a: float, w0_b: float):
+    """The atlas's cells with the two ADMM rows at w0 = w0_a ("admm") and w0_b ("admm_w1")."""
+    from taichi_hair.bench import stability as S
 
-w = [float(a) for a in sys.argv[1].split(",")]
-S.ADMM_W0["admm"], S.ADMM_W0["admm_w1"] = w[0], w[1]
-cells = S.run_atlas(methods=("admm", "admm_w1"))
-print(f"admm = w0 {w[0]}, admm_w1 = w0 {w[1]}")
-print(S.format_summary(cells))
-for c in cells:
-    print(c.method, c.case, f"dt=1/{1 / c.dt:.0f}", c.knob, c.label, c.reason,
-          f"sag {c.sag_error:.3g} stretch {c.stretch:.3g} speed {c.tip_speed:.3g}")
+    S.ADMM_W0["admm"], S.ADMM_W0["admm_w1"] = w0_a, w0_b
+    return S.run_atlas(methods=("admm", "admm_w1"))
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    import taichi as ti
+
+    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    from taichi_hair.bench import stability as S
+
+    w = [float(a) for a in argv[0].split(",")]
+    cells = run(w[0], w[1])
+    print(f"admm = w0 {w[0]}, admm_w1 = w0 {w[1]}")
+    print(S.format_summary(cells))
+    for c in cells:
+        print(c.method, c.case, f"dt=1/{1 / c.dt:.0f}", c.knob, c.label, c.reason,
+              f"sag {c.sag_error:.3g} stretch {c.stretch:.3g} speed {c.tip_speed:.3g}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
