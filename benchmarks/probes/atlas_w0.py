@@ -3,9 +3,10 @@
 Run from the repository root:
     python3 benchmarks/probes/atlas_w0.py W0_A,W0_B      # e.g. 1,25
 
-Runs ``taichi_hair.bench.stability.run_atlas`` for its two ADMM rows with their w0 set to W0_A ("admm") and
-W0_B ("admm_w1") instead of the study's 25 and 1, and prints the summary and every cell.  A diagnostic: the
-study itself (``taichi-hair bench stability``) keeps its two rows.
+Runs ``taichi_hair.bench.stability.run_atlas`` for its two ADMM rows with their w0
+(``taichi_hair.bench.methods.ADMM_VARIANTS``) set to W0_A ("admm") and W0_B ("admm_w1") instead of the
+study's 25 and 1, and prints the summary and every cell.  A diagnostic: the study itself
+(``taichi-hair bench stability``) keeps its two rows.
 """
 
 import sys
@@ -13,9 +14,11 @@ import sys
 
 def run(w0_a: float, w0_b: float):
     """The atlas's cells with the two ADMM rows at w0 = w0_a ("admm") and w0_b ("admm_w1")."""
+    from taichi_hair.bench import methods
     from taichi_hair.bench import stability as S
 
-    S.ADMM_W0["admm"], S.ADMM_W0["admm_w1"] = w0_a, w0_b
+    # The variants' w0 live in bench/methods.py (the atlas and the Pareto study read them when they build a solver).
+    methods.ADMM_VARIANTS["admm"]["w0"], methods.ADMM_VARIANTS["admm_w1"]["w0"] = w0_a, w0_b
     return S.run_atlas(methods=("admm", "admm_w1"))
 
 
