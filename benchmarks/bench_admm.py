@@ -18,16 +18,12 @@ Figures are printed and written as JSON (default benchmarks/results/admm_<arch>.
 """
 
 import argparse
-import json
 import os
-import platform
-import sys
 import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
+from harness import Bench, results_path, stopwatch, timed  # benchmarks/harness.py (the script's folder is on sys.path)
 
 
 def curly_groom(ti_hair, strands, vertices, seed=0):
@@ -54,19 +50,14 @@ def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="aut
     for profile in (False, True):
         st, ctl = model.state(), model.control()
         solver = th.SolverADMM(model, th.SolverADMMConfig(**cfg), profile=profile)
-        t0 = time.perf_counter()
-        solver.step(st, ctl, 1 / 96)
-        ti.sync()
+        step = lambda: solver.step(st, ctl, 1 / 96)
+        first = timed(step, 0, sync=ti.sync)  # the first step: kernel compilation
         if not profile:
-            res["compile_and_first_step_s"] = time.perf_counter() - t0
+            res["compile_and_first_step_s"] = first["compile_s"]
             res["schedule"] = getattr(solver, "schedule", "stage")
             res["tridiagonal"] = solver.tridiagonal_method
         solver.stage_seconds = {k: 0.0 for k in solver.stage_seconds}
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            solver.step(st, ctl, 1 / 96)
-        ti.sync()
-        el = time.perf_counter() - t0
+        el = timed(step, steps, first=False, sync=ti.sync)["run_total_s"]
         its = steps * iterations
         if profile:
             res["stage_ms_per_iteration"] = {k: 1e3 * v / its for k, v in solver.stage_seconds.items() if v > 0}
@@ -94,9 +85,9 @@ def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto"):
     st, ctl = model.state(), model.control()
     straight = st.to_numpy()
     heights = []
-    t0 = time.perf_counter()
-    solver.step(st, ctl, 1.0)
-    compile_s = time.perf_counter() - t0
+    with stopwatch(ti.sync) as sw:
+        solver.step(st, ctl, 1.0)
+    compile_s = sw.seconds
     heights.append(st.positions()[-1, 1])
     for _ in range(4000):
         solver.step(st, ctl, 1.0)
@@ -112,12 +103,10 @@ def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto"):
     for _ in range(5):
         st.load(straight)  # same fields: no recompilation
         solver.reset_duals()
-        ti.sync()
-        t0 = time.perf_counter()
-        for _ in range(chunks):
-            solver.step(st, ctl, 1.0)
-        ti.sync()
-        timings.append(time.perf_counter() - t0)
+        with stopwatch(ti.sync) as sw:
+            for _ in range(chunks):
+                solver.step(st, ctl, 1.0)
+        timings.append(sw.seconds)
     tip = float(st.positions()[-1, 1])
     return {"iterations": chunks * chunk, "wall_s": float(np.median(timings)), "compile_s": compile_s,
             "final_tip_drop_m": -float(final), "tip_drop_m_after_timed_run": -tip, "w0": w0,
@@ -132,15 +121,14 @@ def main(argv=None):
     p.add_argument("--no-mujoco", action="store_true")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    bench = Bench("admm", argv)
     import taichi as ti
 
     ti.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], log_level=ti.WARN)
     import taichi_hair as th
 
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
-    out = {"date": time.strftime("%Y-%m-%d"), "arch": arch, "machine": platform.processor() or platform.machine(),
-           "cpu_count": os.cpu_count(), "python": platform.python_version(), "taichi": ti.__version__,
-           "throughput": []}
+    out = {"date": time.strftime("%Y-%m-%d"), "arch": arch, "throughput": []}
     print(f"SolverADMM benchmark on {arch} ({os.cpu_count()} cores), taichi {ti.__version__}")
     print(f"{'strands x verts':>16} {'ms/iter':>9} {'Mvert-it/s':>11} {'compile s':>10}  stage ms/iter")
     for size in args.sizes.split(","):
@@ -157,11 +145,7 @@ def main(argv=None):
           f"tip drop {1e3 * rest['final_tip_drop_m']:.3f} mm")
     if not args.no_mujoco:
         try:
-            import mujoco_cable  # noqa: F401  (benchmarks/ is on sys.path when run as a script)
-        except ImportError:
-            sys.path.insert(0, HERE)
-        try:
-            import mujoco_cable
+            import mujoco_cable  # benchmarks/mujoco_cable.py (the script's folder is on sys.path)
 
             mj = mujoco_cable.time_to_rest()
             out["mujoco_rod_to_rest"] = mj
@@ -170,12 +154,10 @@ def main(argv=None):
                   f"ratio ADMM/MuJoCo wall time = {rest['wall_s'] / mj['wall_s']:.1f}")
         except ImportError as exc:
             print(f"MuJoCo comparison skipped: {exc}")
-    path = args.out or os.path.join(HERE, "results", f"admm_{arch}.json")
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(path, "w") as fh:
-        json.dump(out, fh, indent=2)
+    path = bench.write(args.out or results_path(f"admm_{arch}.json"), out)
     print(f"wrote {path}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -16,16 +16,11 @@ Kernel compilation is excluded (a warm-up step first).  Figures are printed and 
 """
 
 import argparse
-import json
-import os
-import sys
 import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
-sys.path.insert(0, HERE)
+from harness import Bench, results_path, stopwatch  # benchmarks/harness.py (the script's folder is on sys.path)
 
 
 def straight_groom(th, strands, vertices, gap, direction=(1.0, 0.2, 0.5), length=0.2):
@@ -58,32 +53,30 @@ def timed_run(th, ti, model, cfg, steps, dt=1 / 96, moving="nod"):
     solver.step(st, ctl, dt)  # compile
     st.load(snap)
     solver.reset_duals()
-    ti.sync()
-    t0 = time.perf_counter()
-    for k in range(steps):
-        if moving == "nod":
-            ctl.set_body_transform(0, nod((k + 1) * dt), np.zeros(3))
-        elif moving == "sway":
-            ctl.set_body_transform(0, np.eye(3), sway((k + 1) * dt))
-        solver.step(st, ctl, dt)
-    ti.sync()
-    return 1e3 * (time.perf_counter() - t0) / steps, st.positions().astype(np.float64), solver
+    with stopwatch(ti.sync) as sw:
+        for k in range(steps):
+            if moving == "nod":
+                ctl.set_body_transform(0, nod((k + 1) * dt), np.zeros(3))
+            elif moving == "sway":
+                ctl.set_body_transform(0, np.eye(3), sway((k + 1) * dt))
+            solver.step(st, ctl, dt)
+    return 1e3 * sw.seconds / steps, st.positions().astype(np.float64), solver
 
 
-def main() -> None:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--strands", type=int, default=1000)
     ap.add_argument("--steps", type=int, default=48)
     ap.add_argument("--out", default=None)
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
+    bench = Bench("fidelity", argv)
     import taichi as ti
 
     ti.init(arch=getattr(ti, a.arch), default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     import taichi_hair as th
-    from machine_info import machine
 
-    res = {"machine": machine(), "arch": a.arch, "date": time.strftime("%Y-%m-%d"), "strands": a.strands}
+    res = {"arch": a.arch, "date": time.strftime("%Y-%m-%d"), "strands": a.strands}
 
     # 1. Twist.
     model = straight_groom(th, a.strands, 32, gap=0.005)
@@ -123,9 +116,9 @@ def main() -> None:
     solver.step(st, ctl, 1.0)
     st.load(snap)
     solver.reset_duals()
-    t0 = time.perf_counter()
-    r = equilibrium(solver, st, ctl, 1e-6, 5000)
-    t_eq = time.perf_counter() - t0
+    with stopwatch(ti.sync) as sw:
+        r = equilibrium(solver, st, ctl, 1e-6, 5000)
+    t_eq = sw.seconds
     x_eq = st.positions().astype(np.float64)
     rho_a = 1300 * np.pi * (5e-5) ** 2
     ms, x_dyn, _ = timed_run(th, ti, model, th.SolverADMMConfig(iterations=10, w0=1.0, air_viscosity=20 * rho_a),
@@ -137,12 +130,10 @@ def main() -> None:
     print(f"equilibrium: {n} cantilevers, quasistatic {t_eq:.2f} s ({r.steps} steps) vs dynamic to rest "
           f"{ms * 288 / 1e3:.2f} s (3 s simulated); rest shapes {res['equilibrium']['max_distance_m'] * 1e6:.1f} um apart")
 
-    out = a.out or os.path.join(HERE, "results", f"fidelity_{a.arch}.json")
-    os.makedirs(os.path.dirname(out), exist_ok=True)
-    with open(out, "w") as fh:
-        json.dump(res, fh, indent=2)
+    out = bench.write(a.out or results_path(f"fidelity_{a.arch}.json"), res)
     print(f"wrote {out}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

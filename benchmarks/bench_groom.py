@@ -25,18 +25,12 @@ whose simulation diverges writes what it measured and the error (exit code 1).
 
 import argparse
 import datetime
-import json
 import os
-import platform
 import sys
-import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
-
-from machine_info import machine  # benchmarks/machine_info.py (the script folder is on sys.path)
+from harness import Bench, results_path, stopwatch  # benchmarks/harness.py (the script's folder is on sys.path)
 
 
 def main(argv=None):
@@ -52,6 +46,7 @@ def main(argv=None):
     p.add_argument("--no-draw", action="store_true", help="skip the GGUI drawing (no Vulkan device)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    bench = Bench("groom", argv)
 
     import taichi as ti
 
@@ -63,22 +58,19 @@ def main(argv=None):
 
     res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
-           "image": list(args.size), "machine": platform.processor() or platform.machine(),
-           "cpu_count": os.cpu_count(), "date": datetime.date.today().isoformat(),
-           "command": "python benchmarks/bench_groom.py " + " ".join(sys.argv[1:] if argv is None else argv),
-           "machine_info": machine()}
+           "image": list(args.size), "date": datetime.date.today().isoformat()}
 
-    t = time.perf_counter()
-    head = load_head()
-    groom = generate_groom(head, GeneratorConfig(style="wavy", strands=args.strands,
-                                                 vertices_per_strand=args.vertices, length=0.25, seed=0))
-    res["generate_s"] = time.perf_counter() - t
+    with stopwatch(ti.sync) as sw:
+        head = load_head()
+        groom = generate_groom(head, GeneratorConfig(style="wavy", strands=args.strands,
+                                                     vertices_per_strand=args.vertices, length=0.25, seed=0))
+    res["generate_s"] = sw.seconds
     cfg = GroomingConfig(iterations=args.iterations, guide_ratio=args.guide_ratio,
                          contacts=args.contacts == "on", autosave_every=0)
     session = GroomingSession(groom, cfg)
-    t = time.perf_counter()
-    session._ensure_built()
-    res["build_s"] = time.perf_counter() - t
+    with stopwatch(ti.sync) as sw:
+        session._ensure_built()
+    res["build_s"] = sw.seconds
     sim = session._sim
     res["guides"] = int(sim.model.strand_count)
     res["simulated_vertices"] = int(sim.model.vertex_count)
@@ -98,40 +90,36 @@ def main(argv=None):
     res["frames_all_ms"] = []  # every frame as it completes (a diverged run keeps the ones before)
 
     def frame():
-        t0 = time.perf_counter()
-        sim.solver.step(sim.state, sim.control, 1.0)
-        ti.sync()
-        t1 = time.perf_counter()
-        sim.skin.deform(sim.state, sim.control)
-        ti.sync()
-        t2 = time.perf_counter()
-        if viewer is not None:
-            viewer.set_positions_field(sim.skin.fields.render_vertex_position)
-            viewer.render()
-            viewer.window.get_image_buffer_as_numpy()
-        t3 = time.perf_counter()
-        res["frames_all_ms"].append([1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (t3 - t2)])
-        return 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (t3 - t2)
+        with stopwatch(ti.sync) as simulation:
+            sim.solver.step(sim.state, sim.control, 1.0)
+        with stopwatch(ti.sync) as skinning:
+            sim.skin.deform(sim.state, sim.control)
+        with stopwatch(ti.sync) as drawing:
+            if viewer is not None:
+                viewer.set_positions_field(sim.skin.fields.render_vertex_position)
+                viewer.render()
+                viewer.window.get_image_buffer_as_numpy()
+        ms = (1e3 * simulation.seconds, 1e3 * skinning.seconds, 1e3 * drawing.seconds)
+        res["frames_all_ms"].append(list(ms))
+        return ms
 
     from taichi_hair.errors import SimulationDivergedError
 
-    out = args.out or os.path.join(HERE, "results", "groom", f"groom_{args.strands}_{arch}_contacts_{args.contacts}.json")
-    os.makedirs(os.path.dirname(out), exist_ok=True)
+    out = args.out or results_path("groom", f"groom_{args.strands}_{arch}_contacts_{args.contacts}.json")
     try:
-        return _measure(args, res, frame, session, sim, groom, ti, out, viewer)
+        return _measure(args, res, frame, session, sim, groom, ti, out, viewer, bench)
     except SimulationDivergedError as exc:
         # A result too: written with what was measured before it.
         res["diverged"] = str(exc)
-        with open(out, "w") as fh:
-            json.dump(res, fh, indent=1)
+        bench.write(out, res, indent=1)
         print(f"DIVERGED: {exc}\nwrote {out}")
         return 1
 
 
-def _measure(args, res, frame, session, sim, groom, ti, out, viewer):
-    t = time.perf_counter()
-    first = frame()
-    res["first_frame_s"] = time.perf_counter() - t
+def _measure(args, res, frame, session, sim, groom, ti, out, viewer, bench):
+    with stopwatch(ti.sync) as sw:
+        first = frame()
+    res["first_frame_s"] = sw.seconds
     res["first_frame_split_ms"] = dict(zip(("simulation", "skinning", "drawing"), first))
     print(f"first frame (kernel compilation) {res['first_frame_s']:.1f} s: "
           + ", ".join(f"{k} {v / 1e3:.1f} s" for k, v in res["first_frame_split_ms"].items()), flush=True)
@@ -154,13 +142,12 @@ def _measure(args, res, frame, session, sim, groom, ti, out, viewer):
     # An edit: grow 10 % of the strands; the next frame updates the Model in place.
     session.select_strands(np.arange(0, groom.strand_count, 10))
     res["load_average_at_edit"] = list(os.getloadavg())
-    t = time.perf_counter()
-    session.scale_length(1.1)
-    res["edit_scale_length_s"] = time.perf_counter() - t
-    t = time.perf_counter()
-    session._ensure_built()
-    ti.sync()
-    res["in_place_update_s"] = time.perf_counter() - t
+    with stopwatch(ti.sync) as sw:
+        session.scale_length(1.1)
+    res["edit_scale_length_s"] = sw.seconds
+    with stopwatch(ti.sync) as sw:
+        session._ensure_built()
+    res["in_place_update_s"] = sw.seconds
     after = frame()
     res["frame_after_edit_ms"] = dict(zip(("simulation", "skinning", "drawing"), after))
     res["rebuilds"], res["updates"] = session.rebuild_count, session.update_count
@@ -171,8 +158,7 @@ def _measure(args, res, frame, session, sim, groom, ti, out, viewer):
     m = res["ms_per_frame"]
     print(f"ms per frame (mean of {args.frames}): simulation {m['simulation']['mean']:.0f}, "
           f"skinning {m['skinning']['mean']:.0f}, drawing {m['drawing']['mean']:.0f}")
-    with open(out, "w") as fh:
-        json.dump(res, fh, indent=1)
+    bench.write(out, res, indent=1)
     print(f"wrote {out}")
     if viewer is not None:
         viewer.close()

@@ -14,9 +14,7 @@ writes ``benchmarks/results/io.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import shutil
 import sys
 import tempfile
@@ -25,11 +23,8 @@ import warnings
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
-
-from taichi_hair.io import Groom, load_groom, save_groom  # noqa: E402
+from harness import Bench, results_path, timed  # benchmarks/harness.py (the script's folder is on sys.path)
+from taichi_hair.io import Groom, load_groom, save_groom
 
 # (label, format, extension, writer options, reader options)
 CASES = [
@@ -62,12 +57,8 @@ def make_groom(strands: int, vertices: int, seed: int = 0) -> Groom:
 
 
 def best_time(fn, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+    """The fastest of ``repeat`` calls (file I/O compiles nothing: no separate first call)."""
+    return timed(fn, repeat, each=True, first=False, sync=lambda: None)["run_min_s"]
 
 
 def main(argv=None) -> int:
@@ -76,9 +67,10 @@ def main(argv=None) -> int:
     p.add_argument("--vertices", type=int, default=32, help="vertices per strand")
     p.add_argument("--repeat", type=int, default=3, help="best of this many runs (text formats: 1)")
     p.add_argument("--formats", nargs="*", default=None, help="labels to run (default: all)")
-    p.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "io.json"))
+    p.add_argument("--out", default=results_path("io.json"))
     p.add_argument("--tmp", default=None, help="folder for the files (default: a fresh temporary folder)")
     args = p.parse_args(argv)
+    bench = Bench("io", argv)
     try:
         from pxr import Usd
 
@@ -132,15 +124,10 @@ def main(argv=None) -> int:
         print(f"{r['format']:>13} {r['file_mb']:8.1f} {r['save_ms']:9.1f} {r['save_mb_s']:9.1f} "
               f"{r['save_strands_s']:14.3g} {r['load_ms']:9.1f} {r['load_mb_s']:9.1f} {r['load_strands_s']:14.3g} "
               f"{str(r['bit_exact']):>5}")
-    result = dict(benchmark="io", strands=args.strands, vertices_per_strand=args.vertices,
-                  repeat=args.repeat, python=platform.python_version(), numpy=np.__version__, usd_core=usd_version,
-                  machine=platform.machine(), processor=platform.processor(), cpu_count=os.cpu_count(),
+    result = dict(strands=args.strands, vertices_per_strand=args.vertices, repeat=args.repeat,
+                  numpy=np.__version__, usd_core=usd_version,
                   time=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), rows=rows)
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    tmp_out = args.out + ".tmp"
-    with open(tmp_out, "w") as fh:
-        json.dump(result, fh, indent=2)
-    os.replace(tmp_out, args.out)
+    bench.write(args.out, result)
     print(f"wrote {args.out}")
     return 0 if all(r["bit_exact"] for r in rows) else 1
 

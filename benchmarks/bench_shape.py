@@ -29,17 +29,11 @@ Figures are printed and written as JSON (default benchmarks/results/shape_<arch>
 
 import argparse
 import datetime
-import json
 import os
-import sys
-import time
 
 import numpy as np
 
-from machine_info import machine  # benchmarks/machine_info.py (the script folder is on sys.path)
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
+from harness import Bench, results_path, timed  # benchmarks/harness.py (the script's folder is on sys.path)
 
 #: Table 2 of the paper: (edge length iterations, local shape iterations) per model size.
 TABLE2_ITERATIONS = {11: (2, 3), 64: (3, 4)}
@@ -91,18 +85,9 @@ def bench_size(th, ti, strands, vertices, methods, steps, scheme="defaults"):
             control.set_body_transform(0, nod_rotation(scene, t), (0.0, 0.0, 0.0))
             solver.step(state, control, DT)
 
-        t0 = time.perf_counter()
-        step()
-        ti.sync()
-        compile_s = time.perf_counter() - t0
-        for _ in range(2):
-            step()
-        ti.sync()
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            step()
-        ti.sync()
-        ms = 1e3 * (time.perf_counter() - t0) / steps
+        timing = timed(step, steps, warmup=2, sync=ti.sync)  # first step (compilation), 2 warm-up, timed steps
+        compile_s = timing["compile_s"]
+        ms = 1e3 * timing["run_mean_s"]
         solver.profile = True
         for _ in range(steps):
             step()
@@ -148,6 +133,7 @@ def main(argv=None):
     p.add_argument("--steps", type=int, default=None, help="timed steps per case (default 10 on cpu, 100 on cuda)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    bench = Bench("shape", argv)
     import taichi as ti
 
     ti.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], default_fp=ti.f32, log_level=ti.WARN)
@@ -158,17 +144,7 @@ def main(argv=None):
     methods = [int(m) for m in args.methods.split(",")]
     version = ".".join(map(str, ti.__version__))
     out = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "arch": arch,
-           "machine": machine(), "taichi": version,
-           "command": "python " + " ".join([os.path.relpath(__file__, os.getcwd())] + sys.argv[1:]),
-           "dt_s": DT, "scheme": args.scheme, "results": []}
-    if arch == "cuda":
-        try:
-            import subprocess
-
-            out["machine"]["gpu"] = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
-                                                   capture_output=True, text=True, timeout=20).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            pass
+           "taichi": version, "dt_s": DT, "scheme": args.scheme, "results": []}  # the GPU's name: machine block
     print(f"SolverShape benchmark on {arch} ({os.cpu_count()} cores), taichi {version}, dt = 1/60 s, "
           f"{steps} timed steps, scheme {args.scheme} {SCHEMES[args.scheme] or '(SolverShapeConfig defaults)'}")
     print(f"{'strands x verts':>15} {'vertices':>9} {'method':>6} {'ms/step':>10} {'compile s':>10} "
@@ -177,12 +153,10 @@ def main(argv=None):
         ns, nv = (int(v) for v in size.split("x"))
         out["results"].extend(bench_size(th, ti, ns, nv, methods, steps, args.scheme))
     suffix = "" if args.scheme == "defaults" else f"_{args.scheme}"
-    path = args.out or os.path.join(HERE, "results", f"shape_{arch}{suffix}.json")
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(path, "w") as fh:
-        json.dump(out, fh, indent=2)
+    path = bench.write(args.out or results_path(f"shape_{arch}{suffix}.json"), out)
     print(f"wrote {path}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -19,17 +19,12 @@ Figures are printed and written as JSON (default benchmarks/results/skinning_<ar
 """
 
 import argparse
-import json
 import math
 import os
-import platform
-import sys
-import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
+from harness import Bench, results_path, stopwatch  # benchmarks/harness.py (the script's folder is on sys.path)
 
 
 def sphere_groom(strands, vertices, radius=0.09, length=0.3, curl_radius=5e-3, curl_pitch=0.05, seed=0):
@@ -64,30 +59,28 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=50)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
+    bench = Bench("skinning", argv)
 
     import taichi as ti
 
     ti.init(arch=getattr(ti, args.arch), default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     from taichi_hair.groom.skinning import SkinningConfig, SkinningLBS, build_guides
 
-    result = {"arch": args.arch, "machine": platform.node(), "cpu_count": os.cpu_count(),
-              "strands": args.strands, "vertices_per_strand": args.vertices, "guide_ratio": args.guide_ratio,
-              "neighbours": args.neighbours, "frames": args.frames,
-              "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-              "load_average_1min_at_start": os.getloadavg()[0]}
+    # The date, the machine's name and the load average at the start: the harness's machine block.
+    result = {"arch": args.arch, "strands": args.strands, "vertices_per_strand": args.vertices,
+              "guide_ratio": args.guide_ratio, "neighbours": args.neighbours, "frames": args.frames}
     cfg = SkinningConfig(guide_ratio=args.guide_ratio, neighbour_count=args.neighbours)
 
-    t0 = time.perf_counter()
-    strands = sphere_groom(args.strands, args.vertices)
-    t1 = time.perf_counter()
-    guides, gmodel = build_guides(strands, None, cfg)
-    t2 = time.perf_counter()
-    sk = SkinningLBS(gmodel, guides, strands, cfg)
-    ti.sync()
-    t3 = time.perf_counter()
+    with stopwatch(ti.sync) as groom_t:
+        strands = sphere_groom(args.strands, args.vertices)
+    with stopwatch(ti.sync) as guides_t:
+        guides, gmodel = build_guides(strands, None, cfg)
+    with stopwatch(ti.sync) as binding_t:
+        sk = SkinningLBS(gmodel, guides, strands, cfg)
     result.update(guides=int(gmodel.strand_count), guide_vertices=int(gmodel.vertex_count),
                   render_vertices=int(sk.render_vertex_count),
-                  setup_seconds={"groom": t1 - t0, "select_and_build_guides": t2 - t1, "binding": t3 - t2})
+                  setup_seconds={"groom": groom_t.seconds, "select_and_build_guides": guides_t.seconds,
+                                 "binding": binding_t.seconds})
 
     state, control = gmodel.state(), gmodel.control()
     rest = gmodel.vertex_rest_position
@@ -112,21 +105,17 @@ def main(argv=None):
 
     # First call: compile.
     set_frame(0)
-    ti.sync()
-    t0 = time.perf_counter()
-    sk.deform(state, control)
-    ti.sync()
-    result["first_deform_seconds"] = time.perf_counter() - t0
+    with stopwatch(ti.sync) as sw:
+        sk.deform(state, control)
+    result["first_deform_seconds"] = sw.seconds
 
     # Timed: deform only, synchronised per frame.
     times = []
     for f in range(1, args.frames + 1):
         set_frame(f)
-        ti.sync()
-        t0 = time.perf_counter()
-        sk.deform(state, control)
-        ti.sync()
-        times.append(time.perf_counter() - t0)
+        with stopwatch(ti.sync) as sw:
+            sk.deform(state, control)
+        times.append(sw.seconds)
     ms = 1e3 * np.array(times)
     result["ms_per_frame"] = {"mean": float(ms.mean()), "median": float(np.median(ms)), "min": float(ms.min()),
                               "max": float(ms.max())}
@@ -137,17 +126,14 @@ def main(argv=None):
     frames_t, blend_t = [], []
     for f in range(1, args.frames + 1):
         set_frame(f)
-        ti.sync()
-        t0 = time.perf_counter()
-        skm.compute_guide_frames_transport(gmodel, gmodel, control.body_rotation, state.vertex_position,
-                                           sk.fields.guide_edge_frame)
-        ti.sync()
-        t1 = time.perf_counter()
-        skm.apply_skinning(sk.fields, sk.neighbour_count, state.vertex_position, control.body_rotation,
-                           control.body_translation, sk.fields.render_vertex_position)
-        ti.sync()
-        frames_t.append(t1 - t0)
-        blend_t.append(time.perf_counter() - t1)
+        with stopwatch(ti.sync) as frames_sw:
+            skm.compute_guide_frames_transport(gmodel, gmodel, control.body_rotation, state.vertex_position,
+                                               sk.fields.guide_edge_frame)
+        with stopwatch(ti.sync) as blend_sw:
+            skm.apply_skinning(sk.fields, sk.neighbour_count, state.vertex_position, control.body_rotation,
+                               control.body_translation, sk.fields.render_vertex_position)
+        frames_t.append(frames_sw.seconds)
+        blend_t.append(blend_sw.seconds)
     result["ms_per_stage_median"] = {"guide_frames": 1e3 * float(np.median(frames_t)),
                                      "blend": 1e3 * float(np.median(blend_t))}
     x = sk.positions()
@@ -155,10 +141,7 @@ def main(argv=None):
     if not result["finite"]:
         raise SystemExit("bench_skinning: non-finite skinned positions")
 
-    out = args.out or os.path.join(HERE, "results", f"skinning_{args.arch}.json")
-    os.makedirs(os.path.dirname(out), exist_ok=True)
-    with open(out, "w") as fh:
-        json.dump(result, fh, indent=2)
+    out = bench.write(args.out or results_path(f"skinning_{args.arch}.json"), result)
     s = result["setup_seconds"]
     print(f"skinning {args.strands} render strands x {args.vertices} vertices ({sk.render_vertex_count} vertices) "
           f"from {gmodel.strand_count} guides ({gmodel.vertex_count} vertices), k={sk.neighbour_count}, "
@@ -169,8 +152,8 @@ def main(argv=None):
     print(f"  set-up: groom {s['groom']:.2f} s, FPS + guide Model {s['select_and_build_guides']:.2f} s, "
           f"binding {s['binding']:.2f} s; first deform (compile) {result['first_deform_seconds']:.2f} s")
     print(f"  written to {out}")
-    return result
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -21,17 +21,10 @@ Figures are printed and written as JSON (default benchmarks/results/xpbd_<arch>.
 
 import argparse
 import datetime
-import json
-import os
-import sys
-import time
 
 import numpy as np
 
-from machine_info import machine  # benchmarks/machine_info.py (the script folder is on sys.path)
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
+from harness import Bench, results_path, timed  # benchmarks/harness.py (the script's folder is on sys.path)
 
 DT = 1.0 / 60.0
 
@@ -66,18 +59,8 @@ def bench(ti, strands, vertices, settings, steps, schedules):
             control.set_body_transform(0, nod_rotation(scene, t), (0.0, 0.0, 0.0))
             solver.step(state, control, DT)
 
-        t0 = time.perf_counter()
-        step()
-        ti.sync()
-        compile_s = time.perf_counter() - t0
-        for _ in range(2):
-            step()
-        ti.sync()
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            step()
-        ti.sync()
-        seconds = (time.perf_counter() - t0) / steps
+        timing = timed(step, steps, warmup=2, sync=ti.sync)  # first step (compilation), 2 warm-up, timed steps
+        compile_s, seconds = timing["compile_s"], timing["run_mean_s"]
         x = state.positions().astype(np.float64)
         assert np.all(np.isfinite(x))
         stretch = np.abs(solver.edge_stretch(state)[model.host["edge_rest_length"] > 0])
@@ -106,22 +89,20 @@ def main(argv=None):
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     settings = [tuple(int(v) for v in s.split("x")) for s in args.settings.split(",")]
+    record = Bench("bench_xpbd", argv)
 
     import taichi as ti
 
     ti.init(arch=ti.cpu if args.arch == "cpu" else ti.cuda, default_fp=ti.f32, offline_cache=True,
             log_level=ti.WARN)
     rows = bench(ti, args.strands, args.vertices, settings, args.steps, args.schedules.split(","))
-    out = args.out or os.path.join(HERE, "results", f"xpbd_{args.arch}.json")
-    os.makedirs(os.path.dirname(out), exist_ok=True)
-    command = " ".join(["python", "benchmarks/bench_xpbd.py"] + (argv or sys.argv[1:]))
-    result = {"benchmark": "bench_xpbd", "arch": args.arch, "precision": "f32",
+    result = {"arch": args.arch, "precision": "f32",
               "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-              "machine": machine(), "command": command, "note": "shared machine; figures are noisy", "rows": rows}
-    with open(out, "w") as fh:
-        json.dump(result, fh, indent=2)
+              "note": "shared machine; figures are noisy", "rows": rows}
+    out = record.write(args.out or results_path(f"xpbd_{args.arch}.json"), result)
     print(f"wrote {out}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -3,7 +3,8 @@
 Runs the 100-rod cantilever sweep of ``taichi-hair validate cantilever`` for each
 constraint-weight scale w0 (Daviet 2023 Sec. 4.4 uses w0 = 25) and records the
 largest relative H/W error against the heavy elastica every 250 iterations,
-with the wall time.  Writes ``cantilever_convergence.csv`` and ``.png``.
+with the wall time.  Writes ``cantilever_convergence.csv`` and ``.png``, and ``.json`` (the harness's
+machine block, the command, a summary per w0 and the same rows as the CSV).
 
 Usage: python benchmarks/cantilever_convergence.py [--w0 0.1,0.2,0.5,1,5,25] [--iterations 10000] [--out DIR]
 """
@@ -11,12 +12,9 @@ Usage: python benchmarks/cantilever_convergence.py [--w0 0.1,0.2,0.5,1,5,25] [--
 import argparse
 import csv
 import os
-import sys
 import time
 
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
+from harness import Bench, results_path  # benchmarks/harness.py (the script's folder is on sys.path)
 
 
 def main(argv=None):
@@ -24,15 +22,16 @@ def main(argv=None):
     p.add_argument("--w0", default="0.1,0.2,0.5,1,5,25")
     p.add_argument("--iterations", type=int, default=10000)
     p.add_argument("--count", type=int, default=100)
-    p.add_argument("--out", default=os.path.join(HERE, "results"))
+    p.add_argument("--out", default=results_path())
     args = p.parse_args(argv)
+    bench = Bench("cantilever_convergence", argv)
     import taichi as ti
 
     ti.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair import SimulationDivergedError
     from taichi_hair.validation.cantilever import default_lengths, run_cantilever
 
-    rows = []
+    rows, summary = [], []
     for w0 in (float(v) for v in args.w0.split(",")):
         t0 = time.perf_counter()
         hist = []
@@ -49,9 +48,12 @@ def main(argv=None):
         for it, err, wall in hist:
             rows.append({"w0": w0, "iterations": it, "max_abs_rel_error": err, "wall_s": wall, "status": status})
         last = hist[-1] if hist else (0, float("nan"), 0.0)
+        below = next((h[0] for h in hist if h[1] < 0.02), None)
+        summary.append({"w0": w0, "status": status, "iterations": last[0], "max_abs_rel_error": last[1],
+                        "wall_s": last[2], "first_iterations_below_2_percent": below})
         print(f"w0 = {w0:6g}: {status}; after {last[0]} iterations max |error| {100 * last[1]:.2f}% "
               f"({last[2]:.1f} s); first below 2%: "
-              f"{next((h[0] for h in hist if h[1] < 0.02), 'never')}", flush=True)
+              f"{'never' if below is None else below}", flush=True)
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, "cantilever_convergence.csv")
     with open(path, "w", newline="") as fh:
@@ -76,8 +78,11 @@ def main(argv=None):
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(os.path.join(args.out, "cantilever_convergence.png"), dpi=120)
+    bench.write(os.path.join(args.out, "cantilever_convergence.json"),
+                {"count": args.count, "max_iterations": args.iterations, "summary": summary, "rows": rows})
     print(f"wrote {path}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

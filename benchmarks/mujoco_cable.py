@@ -1,6 +1,7 @@
 r"""MuJoCo baseline: time for a MuJoCo cable to bring one hair rod to rest.
 
-This module is self-contained (MuJoCo, NumPy, SciPy; no taichi). It builds one
+This module is self-contained (MuJoCo, NumPy, SciPy; no taichi; the command line
+alone writes its JSON through benchmarks/harness.py). It builds one
 hair rod with MuJoCo's cable model (the ``mujoco.elasticity.cable`` engine
 plugin on an explicit body chain, i.e. what ``<composite type="cable">``
 generates, with a clamp that is correct at the root) and measures the wall time
@@ -8,7 +9,8 @@ MuJoCo needs to bring it from the straight horizontal state to its static
 equilibrium under gravity (the heavy cantilever).
 
 Run ``python benchmarks/mujoco_cable.py`` (``--help`` for options); figures go to
-stdout and, as JSON, to ``benchmarks/results/mujoco_cable.json``.
+stdout and, as JSON with the harness's machine block, to
+``benchmarks/results/mujoco_cable.json``.
 
 The rod
 -------
@@ -142,10 +144,8 @@ mode): 54 steps, 0.54 s simulated, ~8-10 ms wall.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
-import platform
 import statistics
 import sys
 import time
@@ -643,6 +643,9 @@ def main(argv=None):
     ap.add_argument("--sweep", action="store_true",
                     help="run the tuning sweep instead of the single benchmark")
     args = ap.parse_args(argv)
+    from harness import Bench  # benchmarks/harness.py (the script's folder is on sys.path)
+
+    bench = Bench("mujoco_cable", argv, script=__file__)
 
     if args.sweep:
         rows = sweep(integrator=args.integrator or DEFAULT_INTEGRATOR)
@@ -669,9 +672,6 @@ def main(argv=None):
                                 "timestep", "integrator", "damping_time_s",
                                 "joint_damping_nms", "final_tip_drop_m")}
     res["mujoco_version"] = mujoco.__version__
-    res["machine"] = platform.processor() or platform.machine()
-    res["python"] = platform.python_version()
-    res["command"] = " ".join(["python"] + sys.argv)
 
     mm = 1e3
     print(f"MuJoCo {mujoco.__version__} cable ({PLUGIN}), {res['n_edges']} edges, "
@@ -702,11 +702,7 @@ def main(argv=None):
               f"dt = {d['timestep']} s): {d['steps']} steps, "
               f"{d['sim_time_s']:.4g} s simulated, wall {d['wall_s'] * mm:.3f} ms")
 
-    out_dir = os.path.dirname(args.out)
-    if out_dir:
-        os.makedirs(out_dir, exist_ok=True)
-    with open(args.out, "w") as fh:
-        json.dump(res, fh, indent=2)
+    bench.write(args.out, res)
     print(f"  written {args.out}")
     return 0
 
