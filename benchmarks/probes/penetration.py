@@ -1,17 +1,23 @@
-"""Why the hairball's hair-pair penetration p99 stays above one radius (issue 12 item 1's diagnosis).
+"""Why the hairball's hair-pair penetration p99 stayed above one radius (issue 12 item 1's diagnosis).
 
 Run from the repository root:
-    python3 benchmarks/probes/penetration.py STRANDS FRAMES [key=value ...]
-keys: from (first frame printed), variants (a frame: at its last substep, run correction variants from the same
-      pre-correction state and print how the penetration falls with the sweeps), corrmax, relin
-      (correction_relinearize_every), split (correction_mass_splitting), hfric (correction_hair_friction 0/1).
+    python3 benchmarks/probes/penetration.py STRANDS FRAMES [key=value ...] [profile]
+keys: from (first frame printed), variants (a frame: at its last substep, run the code's correction under the
+      config variants of ``VARIANTS`` from the same pre-correction state, 20 / 40 / 80 / 160 sweeps, and print
+      p99 / max / deeper than r / crossed and strain p99 / max), corrmax, relin (correction_relinearize_every),
+      split (correction_mass_splitting), hfric (correction_hair_friction 0/1), admm_relin (experiment:
+      re-linearise the contacts before every k-th ADMM z-step; not kept, no clear change).  ``profile``: Taichi's
+      kernel profiler table at the end.
 The scene is the CLI's hairball (10 iterations, 4 substeps, 2 projection sweeps, 10 + adaptive correction sweeps,
-the default w0).  The correction is re-run here step by step with the code's own kernels, so each stage can be
-measured: after its contact+edge sweeps, after the final edge passes.  Per substep it prints the hair-pair
-penetration p99 / max [um] (p99 over all hair-hair contacts, as ``ContactPipeline.statistics``), the contacts
-deeper than r = 37 um, the crossed pairs (n . (p_a - p_b) < 0: relinearisation kept the begin-of-step normal),
-how deep contacts' vertices are loaded (the most contacts on one of the pair's vertices) and where they sit on the
-strand (local index / edges: 0 root, 1 tip), and the correction sweep count.
+the default w0).  Per substep it prints the hair-pair penetration p99 / max [um] and the contacts deeper than
+r = 37 um before the correction (with the detection's linearisation) and after it (``ContactPipeline.statistics``:
+p99 over all hair-hair contacts), the sweep count, the crossed pairs (n . (p_a - p_b) < 0 along the normal kept on
+the begin-of-step side) of which deep, the median contact load (most contacts on one of the pair's vertices) of all
+and of the deep contacts, and where the deep ones sit on the strand (0 root, 1 tip); then, per substep, what the
+crossed pairs are (apart at the end? closest point at an edge end? edge-pair orientation flipped in the step?) and
+a distance-based penetration (2r - |p_a - p_b| at the current closest points) beside the statistic.
+The split quoted in BENCHMARKS.md (after the sweeps / after the final edge passes, old code) was measured by an
+earlier, uncommitted version of this probe that re-ran the old correction kernel by kernel.
 A diagnostic, not a benchmark.
 """
 
