@@ -17,8 +17,8 @@ colliders of :mod:`taichi_hair.contact.colliders`, build the contact list:
   surface point s, carried rigidly to the end-of-step transform:
   u = x - s_end - r n_end.
 
-Then the vertex-to-contact adjacency (CSR, each list sorted so the projection
-sums in a fixed order: bitwise determinism), the collision weights
+Then the vertex-to-contact adjacency (CSR, each list sorted by batch then index, so the
+projection sums in a fixed order, bitwise deterministic, and reads a batch's entries alone), the collision weights
 W_z,i = m_i / dt~_i^2 on vertices with contacts (zero elsewhere; dt~ of
 Sec. 4.5 from dimensional analysis, per strand), and the mass-split Delassus
 diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i (n_i: the contacts of vertex i, or by default only those in
@@ -135,9 +135,17 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
                     cb += 1
 
 
+#: ``_delassus``'s third choice (after True: by batch, False: by vertex): no mass splitting (n_i = 1).
+SPLIT_NONE = 2
+
+
 @ti.func
 def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> float:
     """Mass-split Delassus diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i of contact c (Sec. 4.5).
+
+    ``split_by_batch``: True (n_i = c's batch's contacts on i), False (n_i = all of i's contacts), or
+    ``SPLIT_NONE`` (n_i = 1: the plain Delassus diagonal D of Eq. 6, no splitting; the correction's option
+    ``ContactConfig.correction_mass_splitting = "none"``).
 
     Clamped vertices enter with the W_z a free vertex would have, although they do not move.  With the
     paper's 1/W_z = 0 for them, a contact whose point lies near a clamped vertex (weight h ~ 1 there and
@@ -154,7 +162,9 @@ def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> f
             # Virtual copies of vertex v: all its contacts (the paper's n_i), or only those of c's
             # batch, the ones updated at the same time as c (see ContactConfig.mass_splitting).
             copies = con.vertex_contact_count[v]
-            if ti.static(split_by_batch):
+            if ti.static(split_by_batch == SPLIT_NONE):
+                copies = 1
+            elif ti.static(split_by_batch):
                 copies = 0
                 for e in range(con.vertex_contact_start[v], con.vertex_contact_start[v + 1]):
                     if con.vertex_contact_list[e] % BATCHES == c % BATCHES:
@@ -165,7 +175,7 @@ def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> f
 
 @ti.kernel
 def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.template(), cs: ti.template(),
-                         con: ti.template(), split_by_batch: ti.template()):
+                         con: ti.template(), split_by_batch: ti.template(), frictionless_hair: ti.template()):
     """Re-linearise every contact at the current x, before the geometric correction.
 
     Contacts are linearised at the beginning of the step (closest points, normal, body tangent plane).
@@ -176,6 +186,8 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
     of the begin-of-step normal (a pair that crossed is pushed back, not through); each body contact takes
     the collider's distance and normal at x.  The tangential part still measures the slip since the
     beginning of the step (x^t for hair pairs, the begin-of-step body point carried by the body).
+    ``split_by_batch``: the mass splitting of D_hat (``_delassus``); ``frictionless_hair``: zero the hair-hair
+    friction coefficients (``ContactConfig.correction_hair_friction`` off; the next detection rewrites them).
     """
     nc = ti.min(con.contact_count[None], con.capacity)
     for c in range(nc):
@@ -194,6 +206,8 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
             con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
             con.contact_normal[c] = nrm
             con.contact_kinematic[c] = -(radius[a] + radius[b]) * nrm - (d0 - d0.dot(nrm) * nrm)
+            if ti.static(frictionless_hair):
+                con.contact_friction[c] = 0.0
         else:
             i = vtx[0]
             R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
@@ -208,6 +222,12 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
             con.contact_kinematic[c] = -ref - radius[i] * nrm
     for c in range(nc):
         con.contact_delassus[c] = _delassus(con, c, split_by_batch)
+
+
+@ti.func
+def _batch_order_after(c: ti.i32, d: ti.i32) -> bool:
+    """Does contact c come after d in a vertex's list (ordered by batch c % BATCHES, then index)?"""
+    return c % BATCHES > d % BATCHES or (c % BATCHES == d % BATCHES and c > d)
 
 
 @ti.kernel
@@ -250,17 +270,23 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             if v >= 0:
                 slot = ti.atomic_add(con.vertex_contact_count[v], 1)
                 con.vertex_contact_list[con.vertex_contact_start[v] + slot] = c
-    # Sort each vertex's list (insertion sort; the atomics above fill in any order).
+    # Sort each vertex's list by batch, then contact index (insertion sort; the atomics above fill in any
+    # order), and record where each batch begins: a batch's corrections then read only its own entries.
     for i in con.vertex_contact_count:
         beg = con.vertex_contact_start[i]
         end = con.vertex_contact_start[i + 1]
         for j in range(beg + 1, end):
             key = con.vertex_contact_list[j]
             k = j - 1
-            while k >= beg and con.vertex_contact_list[k] > key:
+            while k >= beg and _batch_order_after(con.vertex_contact_list[k], key):
                 con.vertex_contact_list[k + 1] = con.vertex_contact_list[k]
                 k -= 1
             con.vertex_contact_list[k + 1] = key
+        e = beg
+        for b in ti.static(range(BATCHES)):
+            while e < end and con.vertex_contact_list[e] % BATCHES < b:
+                e += 1
+            con.vertex_batch_start[i, b] = e
         # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5).
         # Kinematic (clamped) vertices do not move (1/W_z = 0) but still count in D_hat with the weight a
         # free vertex would have: see ``_delassus``.
@@ -291,8 +317,13 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
         con.contact_delassus[c] = dh
 
 
-#: Edge-length passes that end the length-holding correction (``ContactPipeline.correct``).
-_FINAL_EDGE_PASSES = 4
+#: Edge-length passes that end the length-holding correction (``ContactPipeline.correct``), before each
+#: depth check.  8, not 4: measured (24 frames of assets/scenes/head_turn.toml) strain p99 / max 0.042 / 0.29 %
+#: with 4 and 0.026 / 0.19 % with 8; the hairball (300 strands, 12 frames) 0.18 / 0.79 % and 0.13 / 0.66 %,
+#: its hair-pair penetration p99 (worst frame) 36 and 32 um.
+_FINAL_EDGE_PASSES = 8
+#: Plain sweeps after each (re)start of the correction before the Chebyshev acceleration begins (Wang 2015's S).
+_CHEBYSHEV_DELAY = 3
 
 
 # --------------------------------------------------------------------------- host orchestration
@@ -338,6 +369,8 @@ class ContactPipeline:
         self.edge_held_length = ti.field(float, n)
         #: Sweeps of the geometric correction in the last step (reported in ``statistics``).
         self.correction_sweeps_last = 0
+        #: z_{k-1}, z_k of the correction's Chebyshev acceleration (allocated on first use).
+        self._cheb = None
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
         #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
         self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
@@ -562,44 +595,84 @@ class ContactPipeline:
         """Geometric contact correction at the end of the step (Alg. 1, last line): project x itself.
 
         Contacts are re-linearised at x first unless ``ContactConfig.relinearize_correction`` is off
-        (x0: x^t).  Unless ``ContactConfig.correction_lengths`` is ``"free"`` (the paper's correction,
-        which moves the contact vertices alone) each sweep also projects every edge back to its rest length
-        (``"rest"``, default) or to its length before the correction (``"before"``)
-        (``projection.correction_sweep``), and edge passes end it.
+        (x0: x^t), then again at the corrected positions every ``correction_relinearize_every`` sweeps
+        (each time the correction restarts from them with fresh corrections), with the correction's own
+        Delassus diagonal (``correction_mass_splitting``) and, unless ``correction_hair_friction``,
+        frictionless hair-hair contacts.  Unless ``ContactConfig.correction_lengths`` is ``"free"`` (the
+        paper's correction, which moves the contact vertices alone) each sweep also projects every edge back
+        to its rest length (``"rest"``, default) or to its length before the correction (``"before"``)
+        (``projection.correction_sweep``), and edge passes end it.  Sweeps are Chebyshev-accelerated
+        (``correction_chebyshev_rho``).  After ``sweeps`` sweeps the correction goes on, 5 at a time, while
+        a contact is deeper than ``correction_tolerance``, up to ``correction_max_iterations`` in all; the
+        depth is checked after the final edge passes, on what the correction would return.
+
+        Why (issue 12, ``benchmarks/probes/penetration.py``, hairball 300 strands, frame 10): with one
+        linearisation, batch mass splitting and friction the correction stalled at tip clumps of 17-20
+        contacts per vertex (p99 penetration 74 um after its 40 sweeps, 54 um after 320); re-linearising
+        every 10 sweeps, no mass splitting and frictionless hair pairs gave 54 / 29 um after 40 / 80
+        sweeps, and with the acceleration 20 / 3 um (from another run's frame 10: 88 / 55 um without it).
         """
-        from .projection import (contact_statistics, correction_end, correction_sweep, hold_lengths_sweep,
-                                 projection_begin, projection_sweep, store_edge_lengths)
+        from .projection import (chebyshev_step, contact_statistics, correction_end, correction_sweep,
+                                 hold_lengths_sweep, projection_begin, projection_sweep, store_edge_lengths)
 
         m = self.model
-        hold = self.config.correction_lengths != "free"
-        if self.config.relinearize_correction:
-            relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con,
-                                 self.config.mass_splitting == "batch")
-        if hold:
-            store_edge_lengths(m, x, self.edge_held_length, self.config.correction_lengths == "rest")
-        projection_begin(x, self.con, True)
         cfg = self.config
+        hold = cfg.correction_lengths != "free"
+        split = {"batch": True, "vertex": False, "none": SPLIT_NONE}[cfg.correction_mass_splitting]
+        frictionless = not cfg.correction_hair_friction
+        every = cfg.correction_relinearize_every if cfg.relinearize_correction else 0
+        if cfg.relinearize_correction:
+            # (Without it the correction keeps the detection's D_hat and friction coefficients.)
+            relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con, split, frictionless)
+        if hold:
+            store_edge_lengths(m, x, self.edge_held_length, cfg.correction_lengths == "rest")
+        projection_begin(x, self.con, True)
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else self.max_radius
+        cap = max(sweeps, cfg.correction_max_iterations)
+        rho = cfg.correction_chebyshev_rho
+        if rho > 0 and self._cheb is None:
+            self._cheb = (ti.Vector.field(3, float, m.vertex_count), ti.Vector.field(3, float, m.vertex_count))
         done = 0
+        since = 0  # sweeps since the last (re)start
+        omega = 1.0
         target = sweeps
-        while done < target:
+        while target > 0:
             if hold:
                 correction_sweep(m, m, self.con, self.edge_held_length)
             else:
                 projection_sweep(self.con)
             done += 1
-            if done == target and target < cfg.correction_max_iterations:
+            since += 1
+            if rho > 0:
+                if since < _CHEBYSHEV_DELAY:
+                    chebyshev_step(m, self.con, self._cheb[0], self._cheb[1], 1.0, True)
+                else:
+                    omega = 2.0 / (2.0 - rho * rho) if since == _CHEBYSHEV_DELAY else 4.0 / (4.0 - rho * rho * omega)
+                    chebyshev_step(m, self.con, self._cheb[0], self._cheb[1], omega, False)
+            if done == target:
+                if hold:
+                    # Edge passes alone: each Gauss-Seidel sweep leaves the colour projected first off by a
+                    # fraction of the last contact push (a 0.4 mm push measured 0.18 % after one pass).  They
+                    # run before the depth check, so the check sees what the correction would return (they
+                    # re-open contacts: p99 12 -> 36 um, measured on the hairball, when they ran after it).
+                    for _ in range(_FINAL_EDGE_PASSES):
+                        hold_lengths_sweep(m, m, self.con, self.edge_held_length)
+                if done >= cap:
+                    break
                 # Past the fixed sweeps, go on in groups of 5 while a contact is deeper than the tolerance.
                 contact_statistics(self.con.vertex_z, self.vertex_radius, self.colliders, self.con,
                                    self.stats_out, False)
                 o = self.stats_out.to_numpy()
-                if max(o[3], o[4]) > tol:
-                    target = min(target + 5, cfg.correction_max_iterations)
-        if hold:
-            # Edge passes alone to end: each Gauss-Seidel pass leaves the colour projected first off by a
-            # fraction of the last contact push (a 0.4 mm push measured 0.18 % after one pass).
-            for _ in range(_FINAL_EDGE_PASSES):
-                hold_lengths_sweep(m, m, self.con, self.edge_held_length)
+                if max(o[3], o[4]) <= tol:
+                    break
+                target = min(target + 5, cap)
+            if every > 0 and done % every == 0:
+                # Re-linearise at the corrected positions and restart from them (fresh corrections r~ = 0):
+                # the closest points and normals of deep pairs move by more than their penetration.
+                correction_end(m, x, self.con)
+                relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con, split, frictionless)
+                projection_begin(x, self.con, True)
+                since = 0
         self.correction_sweeps_last = done
         correction_end(m, x, self.con)
 

@@ -124,16 +124,21 @@ def solve_batch_contacts(con: ti.template(), z: ti.template(), batch: ti.templat
 
 @ti.func
 def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.template()):
-    """Step (2): z_i += W_z,i^-1 sum_{c in batch} h_ci Delta u_c / D_hat_c, vertices in parallel."""
+    """Step (2): z_i += W_z,i^-1 sum_{c in batch} h_ci Delta u_c / D_hat_c, vertices in parallel.
+
+    Each vertex's list is sorted by batch (``contacts.build_adjacency``): only the batch's entries are read."""
     for k in range(con.active_vertex_count[None]):
         i = con.active_vertex[k]
         iw = con.vertex_contact_inv_weight[i]
         if iw > 0.0:
             dz = vec3(0.0)
-            for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
+            stop = con.vertex_contact_start[i + 1]
+            if ti.static(batch + 1 < BATCHES):
+                stop = con.vertex_batch_start[i, batch + 1]
+            for e in range(con.vertex_batch_start[i, batch], stop):
                 c = con.vertex_contact_list[e]
                 dh = con.contact_delassus[c]
-                if c % 8 == batch and dh > 0.0:
+                if dh > 0.0:
                     dz += (_weight_of(con, c, i) / dh) * con.contact_delta[c]
             z[i] += iw * dz
 
@@ -317,3 +322,21 @@ def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), con: ti.templ
     """Both edge colours once more, after the last contact sweep of the correction."""
     for colour in ti.static(range(2)):
         hold_edge_lengths(vertex, edge, con.vertex_z, length, colour)
+
+
+@ti.kernel
+def chebyshev_step(vertex: ti.template(), con: ti.template(), prev: ti.template(), cur: ti.template(), omega: float,
+                   first: ti.template()):
+    """Chebyshev semi-iterative acceleration of the correction's sweeps (Wang 2015, for position-based
+    projections): z_{k+1} = omega (z~_{k+1} - z_{k-1}) + z_{k-1}, with z~ the sweep's result; ``prev`` and
+    ``cur`` hold z_{k-1} and z_k and move on by one.  ``first``: only record z (omega unused)."""
+    for i in con.vertex_z:
+        zt = con.vertex_z[i]
+        if ti.static(first):
+            prev[i] = zt
+            cur[i] = zt
+        elif vertex.vertex_is_fixed[i] == 0:
+            zn = omega * (zt - prev[i]) + prev[i]
+            prev[i] = cur[i]
+            cur[i] = zn
+            con.vertex_z[i] = zn
