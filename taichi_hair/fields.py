@@ -229,6 +229,9 @@ class SolverBuffers:
 
 
 # --------------------------------------------------------------------------- contacts (Sec. 4.5)
+#: Contact batches of the hybrid Gauss-Seidel/Jacobi projection: contact c is in batch c % CONTACT_BATCHES
+#: (Daviet 2023 Sec. 4.5: 8; :mod:`taichi_hair.contact.projection`).
+CONTACT_BATCHES = 8
 ivec4 = ti.types.vector(4, ti.i32)
 vec4 = ti.types.vector(4, float)
 vec9 = ti.types.vector(9, float)
@@ -273,16 +276,14 @@ class ContactFields:
         self.contact_penetration = ti.field(float, c)
         #: Number of contacts n_i touching vertex i [-], shape (vertex_count,).
         self.vertex_contact_count = ti.field(ti.i32, n)
-        #: CSR of the contacts of each vertex, sorted by batch (c % BATCHES of :mod:`taichi_hair.projection`),
+        #: CSR of the contacts of each vertex, sorted by batch (c % CONTACT_BATCHES),
         #: then by contact index: start [-], shape (vertex_count + 1,).
         self.vertex_contact_start = ti.field(ti.i32, n + 1)
         #: CSR entries (contact indices) [-], shape (4 * capacity,).
         self.vertex_contact_list = ti.field(ti.i32, 4 * c)
-        from .projection import BATCHES
-
         #: Where batch b begins in vertex i's CSR list (it ends where batch b + 1 begins, the last batch at
         #: ``vertex_contact_start[i + 1]``) [-], shape (vertex_count, BATCHES).
-        self.vertex_batch_start = ti.field(ti.i32, (n, BATCHES))
+        self.vertex_batch_start = ti.field(ti.i32, (n, CONTACT_BATCHES))
         #: Compact list of the vertices with at least one contact [-], shape (vertex_count,), and its length, shape ().
         self.active_vertex = ti.field(ti.i32, n)
         self.active_vertex_count = ti.field(ti.i32, ())

@@ -19,7 +19,7 @@ PROBES = sorted((BENCHMARKS / "probes").glob("*.py"))
 SCRIPTS = sorted([*BENCHMARKS.glob("bench_*.py"), BENCHMARKS / "cantilever_convergence.py",
                   BENCHMARKS / "mujoco_cable.py"])
 #: Probes another change is converting; checked once they define main().
-PENDING = {"contact_length.py"}
+PENDING = set()
 
 
 @pytest.fixture(scope="module")

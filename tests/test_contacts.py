@@ -463,7 +463,7 @@ def test_hairball_hair_pairs_stay_within_one_radius_and_keep_their_lengths():
     strain p99 <= 0.51 %, max 0.84 %; the correction before issue 12 item 1 (one linearisation, batch mass
     splitting, friction, no acceleration) gave p99 48-70 um from step 34 on, so the bound r tells them
     apart with a 3x margin on the new side."""
-    from taichi_hair.scenes import HairballScene, build_hairball, hairball_rotation
+    from taichi_hair.scene.builtin import HairballScene, build_hairball, hairball_rotation
 
     scene = HairballScene(strands=100, length=0.3)
     model = build_hairball(scene)

@@ -426,7 +426,7 @@ class ContactPipeline:
 
         m, cfg, g = self.model, self.config, self.grid
         x, v = state.vertex_position, state.vertex_velocity
-        compute_edge_bounds(m, x, v, g)
+        compute_edge_bounds(m.edge, x, v, g)
         max_edge = float(g.max_edge_length[None])
         speed = float(g.max_speed[None])
         # Reach of the step (dynamic mode): two edges may approach by their relative displacement,
@@ -452,7 +452,7 @@ class ContactPipeline:
             motion = max_edge
         self.hair_search_skipped = False
         if cfg.hair_hair:
-            proximity_boxes(m, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
+            proximity_boxes(m.edge, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
             if cfg.skip_when_apart and self._strands_apart(x, margin, sweep, fall):
                 # No two strands within reach and none can touch itself: nothing to search (grid.strands_apart).
                 g.edge_candidate_count.fill(0)
@@ -460,13 +460,13 @@ class ContactPipeline:
                 self.hair_search_skip_count += 1
             else:
                 h = self._fill_box_grid(max(max_edge, 1e-9))
-                find_candidates(m, m, x, self.vertex_radius, g, self.boxes, h, margin, sweep, fall)
+                find_candidates(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes, h, margin, sweep, fall)
         else:
             g.edge_candidate_count.fill(0)
         sweep, fall = body_sweep, body_fall
         while True:
-            count_contacts(m, x, v, self.vertex_radius, g, self.colliders, margin, sweep, fall)
-            write_contacts(m, m, x, v, self.vertex_radius, g, self.colliders, self.con, cfg.friction, margin,
+            count_contacts(m.vertex, x, v, self.vertex_radius, g, self.colliders, margin, sweep, fall)
+            write_contacts(m.vertex, m.strand, x, v, self.vertex_radius, g, self.colliders, self.con, cfg.friction, margin,
                            sweep, fall)
             total = int(self.con.contact_count[None])
             if total <= self.con.capacity:
@@ -476,7 +476,7 @@ class ContactPipeline:
                           f"growing it to {new_cap} and detecting again (no contact dropped)", stacklevel=3)
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
-        build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
+        build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                         dt, gn, dynamic, 0, cfg.mass_splitting == "batch")
         self.detections += 1
         # Per-step statistics of the continuous passes of this step.
@@ -498,7 +498,7 @@ class ContactPipeline:
         if self.ccd is None:
             self.ccd = CCDFields(m.vertex_count)
         ccd = self.ccd
-        swept_boxes(m, x0, x, self.vertex_radius, self.boxes, ccd)
+        swept_boxes(m.edge, x0, x, self.vertex_radius, self.boxes, ccd)
         # Two edges outside each other's proximity reach approach by at most twice the largest
         # displacement: when that is within the proximity margin no impact is possible (skip the pass).
         self.ccd_pass_total += 1
@@ -509,7 +509,7 @@ class ContactPipeline:
         # Cells of the longest edge (the paper's size), widened for very fast motion so no swept box spans
         # more than ~5 cells per axis.
         h = self._fill_box_grid(max(float(ccd.max_edge_length[None]), 0.25 * float(ccd.max_box_side[None]), 1e-9))
-        find_impacts(m, m, x0, x, self.vertex_radius, self.boxes, ccd, self.con, h)
+        find_impacts(m.vertex, m.edge, x0, x, self.vertex_radius, self.boxes, ccd, self.con, h)
         self.capped_queries += int(ccd.capped_queries[None])
         count_impact_contacts(ccd, self.con)
         first = min(int(self.con.contact_count[None]), self.con.capacity)
@@ -521,7 +521,7 @@ class ContactPipeline:
             self._grow_contacts(total, keep=first)
         added = total - first
         if added > 0:
-            build_adjacency(m, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
+            build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                             self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == "batch")
         self.continuous_contacts += added
         return added
@@ -532,7 +532,7 @@ class ContactPipeline:
         from .grid import strand_boxes
 
         sb = self.strand_boxes
-        strand_boxes(self.model, self.model, x, self.vertex_radius, self.grid, self.boxes, sb, margin, sweep, fall)
+        strand_boxes(self.model.strand, self.model.edge, x, self.vertex_radius, self.grid, self.boxes, sb, margin, sweep, fall)
         return strands_apart(sb.strand_box_lo.to_numpy(), sb.strand_box_hi.to_numpy(),
                              sb.strand_self_clear.to_numpy())
 
@@ -545,7 +545,7 @@ class ContactPipeline:
         from .grid import count_cells, fill_entries
 
         m, bx = self.model, self.boxes
-        count_cells(m, bx, h)
+        count_cells(m.edge, bx, h)
         entries = int(bx.edge_entry_start[m.vertex_count])
         if entries > bx.entry_capacity:
             new_cap = max(2 * bx.entry_capacity, int(1.25 * entries))
@@ -555,7 +555,7 @@ class ContactPipeline:
             new.edge_box_lo.copy_from(bx.edge_box_lo)
             new.edge_box_hi.copy_from(bx.edge_box_hi)
             self.boxes = bx = new
-            count_cells(m, bx, h)
+            count_cells(m.edge, bx, h)
             self.grow_events += 1
         fill_entries(bx)
         return h
@@ -625,7 +625,7 @@ class ContactPipeline:
             # (Without it the correction keeps the detection's D_hat and friction coefficients.)
             relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con, split, frictionless)
         if hold:
-            store_edge_lengths(m, x, self.edge_held_length, cfg.correction_lengths == "rest")
+            store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == "rest")
         projection_begin(x, self.con, True)
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else self.max_radius
         cap = max(sweeps, cfg.correction_max_iterations)
@@ -638,17 +638,17 @@ class ContactPipeline:
         target = sweeps
         while target > 0:
             if hold:
-                correction_sweep(m, m, self.con, self.edge_held_length)
+                correction_sweep(m.vertex, m.edge, self.con, self.edge_held_length)
             else:
                 projection_sweep(self.con)
             done += 1
             since += 1
             if rho > 0:
                 if since < _CHEBYSHEV_DELAY:
-                    chebyshev_step(m, self.con, self._cheb[0], self._cheb[1], 1.0, True)
+                    chebyshev_step(m.vertex, self.con, self._cheb[0], self._cheb[1], 1.0, True)
                 else:
                     omega = 2.0 / (2.0 - rho * rho) if since == _CHEBYSHEV_DELAY else 4.0 / (4.0 - rho * rho * omega)
-                    chebyshev_step(m, self.con, self._cheb[0], self._cheb[1], omega, False)
+                    chebyshev_step(m.vertex, self.con, self._cheb[0], self._cheb[1], omega, False)
             if done == target:
                 if hold:
                     # Edge passes alone: each Gauss-Seidel sweep leaves the colour projected first off by a
@@ -656,7 +656,7 @@ class ContactPipeline:
                     # run before the depth check, so the check sees what the correction would return (they
                     # re-open contacts: p99 12 -> 36 um, measured on the hairball, when they ran after it).
                     for _ in range(_FINAL_EDGE_PASSES):
-                        hold_lengths_sweep(m, m, self.con, self.edge_held_length)
+                        hold_lengths_sweep(m.vertex, m.edge, self.con, self.edge_held_length)
                 if done >= cap:
                     break
                 # Past the fixed sweeps, go on in groups of 5 while a contact is deeper than the tolerance.
@@ -669,12 +669,12 @@ class ContactPipeline:
             if every > 0 and done % every == 0:
                 # Re-linearise at the corrected positions and restart from them (fresh corrections r~ = 0):
                 # the closest points and normals of deep pairs move by more than their penetration.
-                correction_end(m, x, self.con)
+                correction_end(m.vertex, x, self.con)
                 relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con, split, frictionless)
                 projection_begin(x, self.con, True)
                 since = 0
         self.correction_sweeps_last = done
-        correction_end(m, x, self.con)
+        correction_end(m.vertex, x, self.con)
 
     def clear(self, buf) -> None:
         from .projection import clear_contact_terms

@@ -32,11 +32,12 @@ C_mu: r~ in the friction cone, u_N >= 0, r~_N u_N = 0, and either u_T = 0
 
 import taichi as ti
 
+from ..fields import CONTACT_BATCHES
 from .colliders import body_transform, collider_distance
 
 vec3 = ti.math.vec3
 
-BATCHES = 8
+BATCHES = CONTACT_BATCHES  # contact c is in batch c % BATCHES (Sec. 4.5)
 SEPARATE, STICK, SLIDE = 0, 1, 2
 
 
