@@ -48,3 +48,36 @@ def th():
     import taichi_hair
 
     return taichi_hair
+
+
+# --------------------------------------------------------------------------- the slow tier
+_SLOW_LIST = os.path.join(os.path.dirname(os.path.abspath(__file__)), "slow_tests.txt")
+
+
+def _slow_ids() -> set:
+    """Node ids of tests/slow_tests.txt, keyed as 'file.py::name[params]' (independent of the rootdir)."""
+    ids = set()
+    with open(_SLOW_LIST) as fh:
+        for line in fh:
+            line = line.split("#", 1)[0].strip()
+            if line:
+                ids.add(line.split("/")[-1])
+    return ids
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Mark the tests listed in tests/slow_tests.txt as ``slow`` (the fast tier: ``-m "not slow"``).
+
+    When the whole suite is collected, a listed test that no longer exists fails the run, so the list is
+    kept in step with the tests."""
+    slow = _slow_ids()
+    seen = set()
+    for item in items:
+        key = item.nodeid.split("/")[-1]
+        if key in slow:
+            item.add_marker(pytest.mark.slow)
+            seen.add(key)
+    full = len(items) > 400 and not config.getoption("keyword") and not config.getoption("markexpr")
+    if full and slow - seen:
+        raise pytest.UsageError(f"tests/slow_tests.txt names tests that do not exist: {sorted(slow - seen)}")
