@@ -1,0 +1,317 @@
+"""Narrow phase and contact buffers (Daviet 2023, Sec. 4.5), run once at the beginning of a step.
+
+From the per-edge candidate lists of :mod:`taichi_hair.contact.grid` and the body
+colliders of :mod:`taichi_hair.contact.colliders`, build the contact list:
+
+* hair-hair: the pair (a, b) is a contact when b is among the 6 closest of a
+  or a among the 6 closest of b (the paper discards a contact "not among the 6
+  closest ones for any of the colliding edges"); it is emitted once, by the
+  lower edge index when both lists hold it.  Closest points
+  p_a = (1-s) x_a + s x_{a+1} and p_b = (1-t) x_b + t x_{b+1} give weights
+  h = (1-s, s, -(1-t), -t), normal n = (p_a - p_b)/|p_a - p_b|, contact
+  thickness r = r_a + r_b and u_kin = -r n, so that u = H x + u_kin has normal
+  component n . (p_a - p_b) - r (the gap, with the begin-of-step normal) and
+  tangential component the relative slip since the beginning of the step.
+* body: each free vertex within r + margin of a collider (at the
+  begin-of-step body transform) gets a contact with h = 1 against the body
+  surface point s, carried rigidly to the end-of-step transform:
+  u = x - s_end - r n_end.
+
+Then the vertex-to-contact adjacency (CSR, each list sorted by batch then index, so the
+projection sums in a fixed order, bitwise deterministic, and reads a batch's entries alone), the collision weights
+W_z,i = m_i / dt~_i^2 on vertices with contacts (zero elsewhere; dt~ of
+Sec. 4.5 from dimensional analysis, per strand), and the mass-split Delassus
+diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i (n_i: the contacts of vertex i, or by default only those in
+c's batch, ``ContactConfig.mass_splitting``).
+
+Emission writes contact c only when c < capacity; the count is always exact,
+so the caller detects an overflow, grows the buffers and detects again: no
+contact is ever dropped silently.
+"""
+
+import taichi as ti
+
+from .colliders import acts_on, body_transform, collider_distance
+from .grid import contact_normal, row_holds, segment_closest_points
+from .projection import BATCHES
+
+vec3 = ti.math.vec3
+ivec4 = ti.types.vector(4, ti.i32)
+vec4 = ti.types.vector(4, float)
+
+
+@ti.func
+def _in_list(grid: ti.template(), a: ti.i32, b: ti.i32) -> bool:
+    return row_holds(grid.edge_candidate, grid.edge_candidate_count, a, b)
+
+
+@ti.func
+def _emits(grid: ti.template(), a: ti.i32, k: ti.i32) -> bool:
+    b = grid.edge_candidate[a, k]
+    return a < b or not _in_list(grid, b, a)
+
+
+@ti.kernel
+def count_contacts(vertex: ti.template(), x: ti.template(), v: ti.template(), radius: ti.template(),
+                   grid: ti.template(), cs: ti.template(), margin: float, sweep: float, fall: float):
+    """Per edge: hair-hair contacts it emits; per vertex: body contacts.  Then both prefix sums."""
+    for a in x:
+        c = 0
+        for k in range(grid.edge_candidate_count[a]):
+            if _emits(grid, a, k):
+                c += 1
+        grid.edge_emit_count[a] = c
+        nb = 0
+        if vertex.vertex_is_fixed[a] == 0:
+            for k in range(cs.count_field[None]):
+                if acts_on(cs, k, vertex.vertex_strand[a]):
+                    R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[k])
+                    d, n = collider_distance(cs, k, R.transpose() @ (x[a] - T))
+                    if d < radius[a] + margin + sweep * v[a].norm() + fall:
+                        nb += 1
+        grid.vertex_body_emit_count[a] = nb
+    # Exclusive prefix sums in place (serial; one pass over the vertices); entry n gets the total.
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        n = x.shape[0]
+        run_e = 0
+        run_b = 0
+        for i in range(n):
+            ce = grid.edge_emit_count[i]
+            cb = grid.vertex_body_emit_count[i]
+            grid.edge_emit_count[i] = run_e
+            grid.vertex_body_emit_count[i] = run_b
+            run_e += ce
+            run_b += cb
+        grid.edge_emit_count[n] = run_e
+        grid.vertex_body_emit_count[n] = run_b
+
+
+@ti.kernel
+def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(), v: ti.template(),
+                   radius: ti.template(), grid: ti.template(), cs: ti.template(), con: ti.template(),
+                   hair_friction: float, margin: float, sweep: float, fall: float):
+    """Fill the contact arrays (up to capacity); contact_count gets the exact total."""
+    n = x.shape[0]
+    n_hair = grid.edge_emit_count[n]
+    con.contact_count[None] = n_hair + grid.vertex_body_emit_count[n]
+    cap = con.capacity
+    for a in x:
+        c = grid.edge_emit_count[a]
+        for k in range(grid.edge_candidate_count[a]):
+            if _emits(grid, a, k):
+                if c < cap:
+                    b = grid.edge_candidate[a, k]
+                    s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+                    pa = x[a] + s * (x[a + 1] - x[a])
+                    pb = x[b] + t * (x[b + 1] - x[b])
+                    nrm = contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
+                    r = radius[a] + radius[b]
+                    con.contact_vertex[c] = ivec4(a, a + 1, b, b + 1)
+                    con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
+                    con.contact_normal[c] = nrm
+                    con.contact_kinematic[c] = -r * nrm
+                    con.contact_friction[c] = hair_friction
+                    con.contact_collider[c] = -1
+                c += 1
+        if vertex.vertex_is_fixed[a] == 0:
+            cb = n_hair + grid.vertex_body_emit_count[a]
+            for k in range(cs.count_field[None]):
+                body = cs.collider_body[k]
+                R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, body)
+                q = R.transpose() @ (x[a] - T)
+                d, nq = collider_distance(cs, k, q)
+                if d < radius[a] + margin + sweep * v[a].norm() + fall and acts_on(cs, k, vertex.vertex_strand[a]):
+                    if cb < cap:
+                        Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, body)
+                        s_end = Re @ (q - d * nq) + Te
+                        n_end = Re @ nq
+                        con.contact_vertex[cb] = ivec4(a, -1, -1, -1)
+                        con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
+                        con.contact_normal[cb] = n_end
+                        con.contact_kinematic[cb] = -s_end - radius[a] * n_end
+                        con.contact_friction[cb] = cs.collider_friction[k]
+                        con.contact_collider[cb] = k
+                    cb += 1
+
+
+#: ``_delassus``'s third choice (after True: by batch, False: by vertex): no mass splitting (n_i = 1).
+SPLIT_NONE = 2
+
+
+@ti.func
+def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> float:
+    """Mass-split Delassus diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i of contact c (Sec. 4.5).
+
+    ``split_by_batch``: True (n_i = c's batch's contacts on i), False (n_i = all of i's contacts), or
+    ``SPLIT_NONE`` (n_i = 1: the plain Delassus diagonal D of Eq. 6, no splitting; the correction's option
+    ``ContactConfig.correction_mass_splitting = "none"``).
+
+    Clamped vertices enter with the W_z a free vertex would have, although they do not move.  With the
+    paper's 1/W_z = 0 for them, a contact whose point lies near a clamped vertex (weight h ~ 1 there and
+    h ~ 0.01 on the free one) gets a tiny D_hat, and the z-step moves the free vertex by Delta u / h, a
+    lever amplified a hundredfold: measured, 8,600 clamped strands generated on a head (roots 2.5 mm apart,
+    103k contacts at rest) moved by 56 mm then 1 m in two quasistatic iterations and diverged.  Counting
+    the clamped vertex only under-relaxes such contacts (what cannot move is not asked to).
+    """
+    dh = 0.0
+    for k in ti.static(range(4)):
+        v = con.contact_vertex[c][k]
+        if v >= 0:
+            h = con.contact_weight[c][k]
+            # Virtual copies of vertex v: all its contacts (the paper's n_i), or only those of c's
+            # batch, the ones updated at the same time as c (see ContactConfig.mass_splitting).
+            copies = con.vertex_contact_count[v]
+            if ti.static(split_by_batch == SPLIT_NONE):
+                copies = 1
+            elif ti.static(split_by_batch):
+                copies = 0
+                for e in range(con.vertex_contact_start[v], con.vertex_contact_start[v + 1]):
+                    if con.vertex_contact_list[e] % BATCHES == c % BATCHES:
+                        copies += 1
+            dh += copies * h * h * con.vertex_delassus_inv_weight[v]
+    return dh
+
+
+@ti.kernel
+def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.template(), cs: ti.template(),
+                         con: ti.template(), split_by_batch: ti.template(), frictionless_hair: ti.template()):
+    """Re-linearise every contact at the current x, before the geometric correction.
+
+    Contacts are linearised at the beginning of the step (closest points, normal, body tangent plane).
+    When hair slides by centimetres in a step, the frozen plane of a pair that has moved apart can be
+    "violated" by millimetres although the two edges are millimetres away from each other (measured on
+    the hairball), and projecting x onto it stretches edges by tens of percent.  Here each hair-hair contact
+    takes the closest points of its two edges at x, with the normal of their separation, kept on the side
+    of the begin-of-step normal (a pair that crossed is pushed back, not through); each body contact takes
+    the collider's distance and normal at x.  The tangential part still measures the slip since the
+    beginning of the step (x^t for hair pairs, the begin-of-step body point carried by the body).
+    ``split_by_batch``: the mass splitting of D_hat (``_delassus``); ``frictionless_hair``: zero the hair-hair
+    friction coefficients (``ContactConfig.correction_hair_friction`` off; the next detection rewrites them).
+    """
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for c in range(nc):
+        vtx = con.contact_vertex[c]
+        n_old = con.contact_normal[c]
+        k = con.contact_collider[c]
+        if k < 0:
+            a = vtx[0]
+            b = vtx[2]
+            s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+            d = (x[a] + s * (x[a + 1] - x[a])) - (x[b] + t * (x[b + 1] - x[b]))
+            nrm = n_old
+            if d.dot(n_old) > 0.0 and dist > 1e-12:
+                nrm = d / dist
+            d0 = (x0[a] + s * (x0[a + 1] - x0[a])) - (x0[b] + t * (x0[b + 1] - x0[b]))
+            con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
+            con.contact_normal[c] = nrm
+            con.contact_kinematic[c] = -(radius[a] + radius[b]) * nrm - (d0 - d0.dot(nrm) * nrm)
+            if ti.static(frictionless_hair):
+                con.contact_friction[c] = 0.0
+        else:
+            i = vtx[0]
+            R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+            q = R.transpose() @ (x[i] - T)
+            dq, nq = collider_distance(cs, k, q)
+            nrm = R @ nq
+            surf = x[i] - dq * nrm
+            # Old u_kin = -s_end - r n_end: recover the body point s_end carried from the beginning.
+            s_end = -con.contact_kinematic[c] - radius[i] * n_old
+            ref = nrm.dot(surf) * nrm + (s_end - nrm.dot(s_end) * nrm)
+            con.contact_normal[c] = nrm
+            con.contact_kinematic[c] = -ref - radius[i] * nrm
+    for c in range(nc):
+        con.contact_delassus[c] = _delassus(con, c, split_by_batch)
+
+
+@ti.func
+def _batch_order_after(c: ti.i32, d: ti.i32) -> bool:
+    """Does contact c come after d in a vertex's list (ordered by batch c % BATCHES, then index)?"""
+    return c % BATCHES > d % BATCHES or (c % BATCHES == d % BATCHES and c > d)
+
+
+@ti.kernel
+def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_base: ti.template(),
+                    vertex_typical_length: ti.template(), vertex_dt_bend: ti.template(), dt: float,
+                    gravity_norm: float, dynamic: ti.template(), first_new: ti.i32, split_by_batch: ti.template()):
+    """CSR vertex -> contacts (sorted), W_z (Sec. 4.5 "Collision constraint weights"), D_hat.
+
+    Contacts from ``first_new`` on start from zero; with ``first_new`` = 0 (the proximity detection at the
+    beginning of a step) the collision duals lambda_z are zeroed too.  Contacts appended later in the step
+    (continuous-time detection) keep the earlier contacts' progress: their accumulated corrections
+    r~ = D_hat r are rescaled to the new D_hat (more contacts on a vertex split its mass further), so the
+    impulses r they stand for are unchanged, and lambda_z is kept.
+    """
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for i in con.vertex_contact_count:
+        con.vertex_contact_count[i] = 0
+    for c in range(nc):
+        for k in ti.static(range(4)):
+            v = con.contact_vertex[c][k]
+            if v >= 0:
+                ti.atomic_add(con.vertex_contact_count[v], 1)
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        run = 0
+        na = 0
+        for i in range(con.vertex_contact_count.shape[0]):
+            con.vertex_contact_start[i] = run
+            run += con.vertex_contact_count[i]
+            if con.vertex_contact_count[i] > 0:
+                con.active_vertex[na] = i
+                na += 1
+        con.vertex_contact_start[con.vertex_contact_count.shape[0]] = run
+        con.active_vertex_count[None] = na
+    for i in con.vertex_contact_count:
+        con.vertex_contact_count[i] = 0
+    for c in range(nc):
+        for k in ti.static(range(4)):
+            v = con.contact_vertex[c][k]
+            if v >= 0:
+                slot = ti.atomic_add(con.vertex_contact_count[v], 1)
+                con.vertex_contact_list[con.vertex_contact_start[v] + slot] = c
+    # Sort each vertex's list by batch, then contact index (insertion sort; the atomics above fill in any
+    # order), and record where each batch begins: a batch's corrections then read only its own entries.
+    for i in con.vertex_contact_count:
+        beg = con.vertex_contact_start[i]
+        end = con.vertex_contact_start[i + 1]
+        for j in range(beg + 1, end):
+            key = con.vertex_contact_list[j]
+            k = j - 1
+            while k >= beg and _batch_order_after(con.vertex_contact_list[k], key):
+                con.vertex_contact_list[k + 1] = con.vertex_contact_list[k]
+                k -= 1
+            con.vertex_contact_list[k + 1] = key
+        e = beg
+        for b in ti.static(range(BATCHES)):
+            while e < end and con.vertex_contact_list[e] % BATCHES < b:
+                e += 1
+            con.vertex_batch_start[i, b] = e
+        # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5).
+        # Kinematic (clamped) vertices do not move (1/W_z = 0) but still count in D_hat with the weight a
+        # free vertex would have: see ``_delassus``.
+        inv_w = 0.0
+        if con.vertex_contact_count[i] > 0:
+            dtt = vertex_dt_bend[i]
+            if gravity_norm > 0.0:
+                dtt = ti.min(dtt, ti.sqrt(vertex_typical_length[i] / gravity_norm))
+            if ti.static(dynamic):
+                dtt = ti.min(dtt, dt)
+            inv_w = dtt * dtt / vertex_weight_base[i]
+        con.vertex_delassus_inv_weight[i] = inv_w
+        if vertex.vertex_is_fixed[i] != 0:
+            inv_w = 0.0
+        con.vertex_contact_inv_weight[i] = inv_w
+        if first_new == 0:
+            con.vertex_contact_dual[i] = vec3(0.0)
+    for c in range(nc):
+        dh = _delassus(con, c, split_by_batch)
+        if c < first_new:
+            old = con.contact_delassus[c]
+            if old > 0.0:
+                con.contact_accumulated[c] *= dh / old
+        else:
+            con.contact_accumulated[c] = vec3(0.0)
+            con.contact_delta[c] = vec3(0.0)
+            con.contact_status[c] = 0
+        con.contact_delassus[c] = dh
