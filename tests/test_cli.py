@@ -172,6 +172,12 @@ vertices_per_strand = 9
 [material]
 youngs_modulus_stretch = 2e3   # [Pa]: a millionth of hair's, so the strands stretch under their weight
 
+[solver.contacts]
+hair_hair = false
+# A soft material keeps its stretch only with "before": the default "rest" makes the end-of-step correction
+# hold hair's rest lengths on every edge (measured: with it the p99 strain stayed under the 5 % of --strict).
+correction_lengths = "before"
+
 [[colliders]]
 type = "sphere"
 radius = 0.05
