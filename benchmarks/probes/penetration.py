@@ -27,7 +27,7 @@ import numpy as np
 import taichi as ti
 
 from taichi_hair import SolverADMM, SolverADMMConfig
-from taichi_hair.contact import pipeline as C
+from taichi_hair.contact import narrow as C
 from taichi_hair.contact import projection as P
 from taichi_hair.contact.colliders import SphereCollider
 from taichi_hair.config import ContactConfig
