@@ -21,7 +21,10 @@ Each figure is independent of the solver that made the frame (admm, shape, xpbd 
 - hair-hair: the ADMM solver's ``contact_stats`` keys ``hair_penetration_p99_m``,
   ``hair_penetration_max_m`` and ``crossed_pairs`` when it provides them;
 - rest: the largest vertex speed of the frame [m/s]; a dynamic run "came to rest" when it is below
-  ``REST_SPEED_M_S`` in its last frame.
+  ``REST_SPEED_M_S`` in its last frame;
+- shape drift: the distance of each free vertex of a clamped strand from its authored position carried by
+  the strand's body, |x - (R_b x* + T_b)|, p90 and max [m]: how far the groom is from the shape it was
+  authored in (the sag-free rest pose, issue 14, is judged by it).
 """
 
 from __future__ import annotations
@@ -137,6 +140,26 @@ def body_penetration(positions, colliders, body_rotation, body_translation, vert
     return out
 
 
+# --------------------------------------------------------------------------- shape
+def shape_drift(positions, host: dict, body_rotation=None, body_translation=None) -> dict:
+    """p90 and max of |x - (R_b x* + T_b)| over the free vertices of clamped strands [m] (see the module
+    docstring); x* = ``host["vertex_rest_position"]``, the authored shape in the body frame.  Identity
+    transforms when ``body_rotation`` is None."""
+    x = np.asarray(positions, np.float64)
+    strand = np.asarray(host["vertex_strand"])
+    body = np.asarray(host["strand_body"])[strand]
+    sel = (body >= 0) & (np.asarray(host["vertex_is_fixed"]) == 0)
+    if not sel.any():
+        return dict(drift_p90_m=0.0, drift_max_m=0.0)
+    ref = np.asarray(host["vertex_rest_position"], np.float64)[sel]
+    if body_rotation is not None:
+        R = np.asarray(body_rotation, np.float64)[body[sel]]
+        T = np.asarray(body_translation, np.float64)[body[sel]]
+        ref = np.einsum("kij,kj->ki", R, ref) + T
+    d = np.linalg.norm(x[sel] - ref, axis=1)
+    return dict(drift_p90_m=float(np.percentile(d, 90)), drift_max_m=float(d.max()))
+
+
 # --------------------------------------------------------------------------- one frame
 def frame_quality(positions, velocities, host: dict, colliders=(), body_rotation=None, body_translation=None,
                   contact_stats=None, tolerance: float = INSIDE_TOLERANCE_M) -> dict:
@@ -150,7 +173,8 @@ def frame_quality(positions, velocities, host: dict, colliders=(), body_rotation
 
     Returns a flat dict: strain_p50/p99/max [-], strain_worst_strand, body_penetration_p99_m/max_m (over
     the free vertices, 0 where outside) [m], vertices_inside [-], penetration_worst_strand (-1: none),
-    max_speed_m_s [m/s], and the hair-hair keys that the solver gave.
+    drift_p90_m/drift_max_m [m] (:func:`shape_drift`), max_speed_m_s [m/s], and the hair-hair keys that the
+    solver gave.
     """
     strand = np.asarray(host["vertex_strand"])
     q = strain_statistics(positions, host["edge_rest_length"], strand)
@@ -162,6 +186,7 @@ def frame_quality(positions, velocities, host: dict, colliders=(), body_rotation
         q.update(body_penetration_p99_m=float(np.percentile(d, 99)), body_penetration_max_m=float(depth[k]),
                  vertices_inside=int(np.count_nonzero(depth > tolerance)),
                  penetration_worst_strand=int(strand[k]) if depth[k] > 0 else -1)
+    q.update(shape_drift(positions, host, body_rotation, body_translation))
     v = np.asarray(velocities, np.float64)
     q["max_speed_m_s"] = float(np.max(np.linalg.norm(v, axis=1))) if len(v) else 0.0
     for key in HAIR_KEYS:

@@ -175,9 +175,18 @@ class SolverADMM(SolverBase):
         rest = self._rest_state
         admm.compute_strains(self.measure, m.edge, m.pair, rest.vertex_position, rest.edge_twist, rest,
                              self.buf.pair_rest_kappa, self.buf.edge_strain_begin)
+        # A sag-free rest pose (solvers/rest_pose.py) stores rest moments mu: kappa_bar = kappa(x*) - mu / S.
+        moment = h.get("pair_rest_moment")
+        if moment is not None and h.get("rest_pose_measure") != cfg.strain_measure:
+            raise ValueError(f"the groom's sag-free rest pose was solved for the strain measure "
+                             f"{h.get('rest_pose_measure')!r}, the solver uses {cfg.strain_measure!r}: solve it again "
+                             "(solvers.rest_pose.solve_rest_pose) with this solver's config")
         # Model no more than the scene needs (frames.twist_choice): the twist unknowns of straight round rods.
         if cfg.twist == "solve":
             self.twist_free, why = False, "twist solved (SolverADMMConfig.twist='solve')"
+        elif moment is not None and np.any(moment != 0.0):
+            # A curved rest shape couples twist and bending: dropping the twist would not be exact.
+            self.twist_free, why = False, "twist solved: the groom has a sag-free rest pose (curved rest shape)"
         else:
             from .frames import twist_choice
 
@@ -186,6 +195,11 @@ class SolverADMM(SolverBase):
         if self.twist_free:
             bend = bend.copy()
             bend[:, 2] = 0.0  # the energy minimised over theta has no twist term
+        if moment is not None:
+            rk = self.buf.pair_rest_kappa.to_numpy().astype(np.float64)
+            mu = np.asarray(moment, np.float64)
+            safe = np.where(bend > 0.0, bend, 1.0)
+            self.buf.pair_rest_kappa.from_numpy(np.where(bend > 0.0, rk - mu / safe, rk).astype(f))
         self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
         self.buf.pair_admm_weight.from_numpy(weight.astype(f))
         self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))

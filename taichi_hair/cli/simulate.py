@@ -84,9 +84,12 @@ def _named_scene(args):
         scene_desc = dict(vars(hs), continuous=args.continuous or 0)
     desc = {"name": args.scene, "params": scene_desc, "iterations": iterations, "fps": d["fps"],
             "substeps": d["substeps"], **integ}
+    rest_pose = args.rest_pose or "authored"
+    if rest_pose != "authored":
+        desc["rest_pose"] = rest_pose
     return Scene(name=args.scene, path="", frames=d["frames"], fps=d["fps"], substeps=d["substeps"],
                  gravity=(0.0, -9.81, 0.0), groom=None, solver="admm", solver_config=cfg, colliders=colliders,
-                 bodies=[body], description=desc, model_builder=builder)
+                 bodies=[body], description=desc, model_builder=builder, rest_pose=rest_pose)
 
 
 def _load_scene(args):
@@ -100,7 +103,7 @@ def _load_scene(args):
 
     over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
                 length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous,
-                vertices_per_strand=args.vertices_per_strand, integrator=args.integrator)
+                vertices_per_strand=args.vertices_per_strand, integrator=args.integrator, rest_pose=args.rest_pose)
     return load_scene(args.scene, over)
 
 
@@ -229,6 +232,9 @@ def register(sub) -> None:
     s.add_argument("--integrator", choices=("backward_euler", "bdf2"), default=None,
                    help="admm time integrator (default the scene's, else backward_euler; bdf2 is second order "
                         "and keeps a swing's energy, SolverADMMConfig.integrator)")
+    s.add_argument("--rest-pose", choices=("authored", "sag-free"), default=None,
+                   help="rest pose of the groom: 'authored' (its shape; default) or 'sag-free' (rest strains solved "
+                        "so that the shape holds under gravity; ADMM only; the scene file's [groom] rest_pose)")
     s.add_argument("--seed", type=int, default=None,
                    help="random seed of a procedural groom (default: the scene's, or 0)")
     s.add_argument("--vertices-per-strand", type=int, default=None,

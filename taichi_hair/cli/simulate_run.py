@@ -157,6 +157,8 @@ class SimulateRun:
               + (f"; resuming after frame {self.start}" if self.start else ""))
         for line in _model_lines(self.solver, self.choice):
             print("model: " + line)
+        if scene.rest_pose_result is not None:
+            print(scene.rest_pose_result.summary())
         print(header)
 
     # ------------------------------------------------------------------ stepping
@@ -284,6 +286,8 @@ class SimulateRun:
                        peak_host_memory_mb=peak_mb, diverged=self.diverged,
                        load_average_1min_at_end=os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
                        cpu_count=os.cpu_count())
+        if scene.rest_pose_result is not None:
+            summary["rest_pose"] = _rest_pose_report(scene.rest_pose_result)
         summary["model"] = dict(_model_report(solver), **({"method_choice": choice.description} if choice else {}))
         if choice is not None:
             summary["method_choice"] = dict(method=choice.point.method, dt=choice.point.dt,
@@ -371,11 +375,20 @@ def _frame_quality(model, scene, control, x, v, contact_stats) -> dict:
     """This frame's figures of :func:`taichi_hair.quality.frame_quality`, as stats.csv columns."""
     from ..quality import frame_quality
 
-    rot = control.body_rotation.to_numpy() if scene.colliders else None
-    tr = control.body_translation.to_numpy() if scene.colliders else None
+    rot = control.body_rotation.to_numpy()
+    tr = control.body_translation.to_numpy()
     q = frame_quality(x, v, model.host, scene.colliders, rot, tr, contact_stats)
     q.pop("max_speed_m_s")  # the row has it as max_speed
     return q
+
+
+def _rest_pose_report(r) -> dict:
+    """summary.json's ``rest_pose``: what the sag-free solve found (solvers/rest_pose.py)."""
+    res = r.strand_residual[np.isfinite(r.strand_residual)]
+    return dict(kind="sag-free", strands_held=r.held_count, strands=int(r.strand_rest_turn.shape[0]),
+                largest_rest_turn=float(r.strand_rest_turn.max()),
+                largest_residual_over_weight=float(res.max()) if res.size else None, seconds=r.seconds,
+                not_held=[dict(strand=s, why=why) for s, why in r.unheld[:100]], not_held_count=len(r.unheld))
 
 
 def _run_quality(rows, eq) -> dict:
@@ -397,6 +410,9 @@ def _run_quality(rows, eq) -> dict:
                  vertices_inside_max=deep["vertices_inside"], vertices_inside_worst_frame=deep["frame"],
                  penetration_worst_strand=deep["penetration_worst_strand"],
                  vertices_inside_last=rows[-1]["vertices_inside"])
+    if "drift_p90_m" in rows[-1]:
+        q.update(drift_p90_last_m=rows[-1]["drift_p90_m"], drift_p90_max_m=max(r["drift_p90_m"] for r in rows),
+                 drift_max_m=max(r["drift_max_m"] for r in rows))
     for key in HAIR_KEYS:
         vals = [r[key] for r in rows if r.get(key) is not None]
         if vals:

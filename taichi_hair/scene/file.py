@@ -19,6 +19,7 @@ degrees; relative paths are relative to the scene file)::
 
     [groom]                      # either a file ...
     file = "../ponytail/tail.tfx"   # or a list of files, concatenated
+    rest_pose = "authored"       # or "sag-free": rest strains solved so the shape holds under gravity
     scale = 0.0035               # file units -> metres (or units = "cm" / "mm" / "m" / "in")
     strands = 100                # optional: keep this many strands, evenly spaced through the file
     root = "clamped"             # "clamped" (roots follow `body`) or "free"
@@ -112,6 +113,9 @@ class Scene:
         description: JSON-able description of everything that determines the result
             (checkpoints compare it before resuming).
         model_builder: optional callable returning the Model (the built-in scenes use their own builders).
+        rest_pose: "authored" or "sag-free" ([groom] rest_pose; :mod:`taichi_hair.solvers.rest_pose`).
+        rest_pose_result: the :class:`~taichi_hair.solvers.rest_pose.RestPoseResult` of the last
+            :meth:`build_model` of a sag-free scene (None otherwise).
     """
 
     name: str
@@ -131,6 +135,8 @@ class Scene:
     output: str = ""
     description: dict = field(default_factory=dict)
     model_builder: object = None
+    rest_pose: str = "authored"
+    rest_pose_result: object = None
 
     @property
     def body_count(self) -> int:
@@ -145,9 +151,28 @@ class Scene:
         return out
 
     def build_model(self):
-        """The Model (allocates Taichi fields: call after ``ti.init``)."""
-        if self.model_builder is not None:
-            return self.model_builder()
+        """The Model (allocates Taichi fields: call after ``ti.init``), with its sag-free rest pose solved
+        when ``rest_pose = "sag-free"`` (the result in :attr:`rest_pose_result`)."""
+        model = self.model_builder() if self.model_builder is not None else self._build_groom_model()
+        if self.rest_pose == "sag-free":
+            self.rest_pose_result = self.solve_rest_pose(model)
+        return model
+
+    def solve_rest_pose(self, model):
+        """Solve and apply the sag-free rest pose of ``model`` for this scene's solver and gravity (in the
+        roots' body frame at time 0); returns the :class:`~taichi_hair.solvers.rest_pose.RestPoseResult`."""
+        if self.solver != "admm":
+            raise SceneError(f"{self.path or self.name}: [groom] rest_pose: 'sag-free' is solved for the ADMM "
+                             f"model (Discrete Elastic Rods); the scene's solver is {self.solver!r}")
+        from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
+
+        R, _ = self.body_transforms(0.0)[self.root_body]
+        g_body = np.asarray(R, np.float64).T @ np.asarray(self.gravity, np.float64)
+        result = solve_rest_pose(model, self.solver_config, gravity=g_body)
+        apply_rest_pose(model, result)
+        return result
+
+    def _build_groom_model(self):
         from ..builder import GroomBuilder
         from ..config import RodMaterial
 
@@ -180,7 +205,7 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         overrides: command-line values that replace the file's: ``frames``, ``fps``, ``substeps``,
             ``strands`` (generator count, or the strands kept from a file), ``length``, ``seed`` and
             ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``integrator`` (admm), ``continuous`` (admm
-            contact detections).
+            contact detections), ``rest_pose`` ([groom] rest_pose).
 
     Raises:
         SceneError: naming the file, the table and the key.
@@ -239,7 +264,11 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
             "bodies": [b.description for b in bodies]}
     scene = Scene(name=name, path=path, frames=frames, fps=fps, substeps=substeps, gravity=gravity, groom=groom,
                   root=root, root_body=body, material=material, solver=kind, solver_config=cfg, colliders=colliders,
-                  bodies=bodies, output=resolve_path(base, output) if output else "", description=desc)
+                  bodies=bodies, output=resolve_path(base, output) if output else "", description=desc,
+                  rest_pose=gdesc.get("rest_pose", "authored"))
+    if scene.rest_pose == "sag-free" and kind != "admm":
+        raise SceneError(f"{path}: [groom] rest_pose: 'sag-free' is solved for the ADMM model; the scene's "
+                         f"[solver] type is {kind!r}")
     for k, c in enumerate(colliders):
         if c.body >= scene.body_count:
             raise SceneError(f"{path}: [colliders {k}] body: {c.body} is not a body of the scene (it has "

@@ -13,6 +13,8 @@ from .schema import SceneError, Table, at_least, dataclass_from, positive
 
 SOLVERS = ("admm", "shape", "xpbd")
 COLLIDER_TYPES = ("sphere", "capsule", "plane", "mesh")
+#: [groom] rest_pose: "authored" (rest shape = the file's shape) or "sag-free" (solvers/rest_pose.py).
+REST_POSES = ("authored", "sag-free")
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 
 
@@ -55,7 +57,12 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
     root = t.get("root", "str", "clamped", lambda v: None if v in ("clamped", "free") else
                  f"must be 'clamped' or 'free', got {v!r}")
     body = t.get("body", "int", 0, at_least(0))
+    rest_pose = t.get("rest_pose", "str", "authored", lambda v: None if v in REST_POSES else
+                      f"must be one of {', '.join(REST_POSES)}, got {v!r}")
+    rest_pose = overrides.get("rest_pose", rest_pose)
     desc.update(root=root, body=body)
+    if rest_pose != "authored":  # (absent from the description otherwise: old checkpoints still resume)
+        desc["rest_pose"] = rest_pose
     if t.has("file") == t.has("generator"):
         t.fail("give either 'file' (a groom file) or 'generator' (one of " + ", ".join(STYLES) + ")")
     if t.has("file"):
