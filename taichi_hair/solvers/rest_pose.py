@@ -43,7 +43,8 @@ Choices where the problem is silent (written down here and in the README):
   that a strand lying horizontally needs a large rest curvature: 30 cm of human hair held horizontally
   needs a rest turn of ~1.4 rad per 2.5 mm edge at the root (the strand is reported as not held).
 * **A strand is "held"** when every rest turn |kappa_bar_i| stays below ``max_rest_turn`` or the authored
-  turn |kappa_i(x*)| where that is larger (Korner's strain is 2 sin(phi/2): it cannot exceed 2) and the residual of the statics is below ``residual_tolerance``
+  turn |kappa_i(x*)| where that is larger (Korner's strain is 2 sin(phi/2): it cannot exceed 2) and the
+  residual of the statics is below ``residual_tolerance``
   of the strand's weight.  A strand not held keeps its authored rest pose and is reported by index with
   its worst turn and residual; the rest of the groom is solved.
 * Free-root strands have no equilibrium under gravity: they keep their authored rest pose (reported).
