@@ -30,6 +30,29 @@ def _transport(u: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     return c * u + np.cross(b, u) + (np.dot(b, u) / (1.0 + c)) * b
 
 
+def space_parallel_directors(tangent: np.ndarray, starts: np.ndarray, counts: np.ndarray,
+                             root_directors: np.ndarray) -> np.ndarray:
+    """Rest reference directors: the root director of each strand space-parallel transported along it,
+    advanced one local index at a time for all strands at once (float64).
+
+    Args:
+        tangent: (n, 3) unit edge tangents (ghost slots ignored).  starts, counts: (k,) strand layout.
+        root_directors: (k, 3) unit directors of the root edges, perpendicular to them.
+    Returns (n, 3) directors (zero on ghost slots)."""
+    n = tangent.shape[0]
+    dirs = np.zeros((n, 3))
+    dirs[starts] = root_directors
+    for j in range(1, int(counts.max()) - 1):
+        idx = starts[counts - 1 > j] + j
+        t0, t1, u = tangent[idx - 1], tangent[idx], dirs[idx - 1]
+        b = np.cross(t0, t1)
+        c = np.sum(t0 * t1, axis=1)
+        d = c[:, None] * u + np.cross(b, u) + (np.sum(b * u, axis=1) / (1.0 + c))[:, None] * b
+        d -= np.sum(d * t1, axis=1)[:, None] * t1
+        dirs[idx] = d / np.linalg.norm(d, axis=1)[:, None]
+    return dirs
+
+
 def points_array(points, what: str, rows: str = "n") -> np.ndarray:
     """``points`` as a float64 (rows, 3) array, or a ValueError starting with ``what`` (e.g.
     "strand 3: field 'points'")."""
@@ -294,19 +317,8 @@ class GroomBuilder:
         interior = (local > 0) & ~last
         sA = area[strand_of]
 
-        # Rest reference frames: space-parallel transport of the root director along each strand,
-        # advanced one local index at a time for all strands at once.
-        dirs = np.zeros((n, 3))
         root_dirs = np.concatenate(self._directors)
-        dirs[starts] = root_dirs
-        for j in range(1, int(counts.max()) - 1):
-            idx = starts[counts - 1 > j] + j
-            t0, t1, u = tangent[idx - 1], tangent[idx], dirs[idx - 1]
-            b = np.cross(t0, t1)
-            c = np.sum(t0 * t1, axis=1)
-            d = c[:, None] * u + np.cross(b, u) + (np.sum(b * u, axis=1) / (1.0 + c))[:, None] * b
-            d -= np.sum(d * t1, axis=1)[:, None] * t1
-            dirs[idx] = d / np.linalg.norm(d, axis=1)[:, None]
+        dirs = space_parallel_directors(tangent, starts, counts, root_dirs)
 
         clamped = bodies[strand_of] >= 0
         fixed_vertex = clamped & (local <= 1)

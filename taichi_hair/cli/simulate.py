@@ -85,6 +85,8 @@ def _named_scene(args):
     desc = {"name": args.scene, "params": scene_desc, "iterations": iterations, "fps": d["fps"],
             "substeps": d["substeps"], **integ}
     rest_pose = args.rest_pose or "authored"
+    if rest_pose == "file":
+        raise CLIError(f"--rest-pose file needs a groom file; the built-in scene {args.scene!r} generates its groom")
     if rest_pose != "authored":
         desc["rest_pose"] = rest_pose
     return Scene(name=args.scene, path="", frames=d["frames"], fps=d["fps"], substeps=d["substeps"],
@@ -232,9 +234,10 @@ def register(sub) -> None:
     s.add_argument("--integrator", choices=("backward_euler", "bdf2"), default=None,
                    help="admm time integrator (default the scene's, else backward_euler; bdf2 is second order "
                         "and keeps a swing's energy, SolverADMMConfig.integrator)")
-    s.add_argument("--rest-pose", choices=("authored", "sag-free"), default=None,
-                   help="rest pose of the groom: 'authored' (its shape; default) or 'sag-free' (rest strains solved "
-                        "so that the shape holds under gravity; ADMM only; the scene file's [groom] rest_pose)")
+    s.add_argument("--rest-pose", choices=("authored", "sag-free", "file"), default=None,
+                   help="rest pose of the groom: 'authored' (its shape; default), 'sag-free' (rest strains solved "
+                        "so that the shape holds under gravity) or 'file' (the groom file's rest curve, e.g. from "
+                        "taichi-hair rest-pose); ADMM only; the scene file's [groom] rest_pose")
     s.add_argument("--seed", type=int, default=None,
                    help="random seed of a procedural groom (default: the scene's, or 0)")
     s.add_argument("--vertices-per-strand", type=int, default=None,

@@ -30,7 +30,8 @@ import tempfile
 import numpy as np
 
 ERROR_PREFIX = "TAICHI_HAIR_USD_ERROR: "
-PRIMVARS = {"rest": np.float32, "displayColor": np.float32, "region": np.int64, "guide": bool, "pinned": bool}
+PRIMVARS = {"rest": np.float32, "restTwist": np.float64, "displayColor": np.float32, "region": np.int64, "guide": bool,
+            "pinned": bool}
 
 
 class USDExtractError(Exception):

@@ -44,6 +44,9 @@ class Groom:
         guide: True for a guide (simulated) strand, bool, shape (S,), or None.
         rest_points: rest pose [units], shape (N, 3), dtype of ``points``, or None
             when the file carries none (then ``points`` is the rest pose).
+        rest_twist: twist of the rest pose's material frame about its space-parallel reference frame [rad],
+            float64, shape (N,), or None (zero); written beside ``rest_points`` by the sag-free rest pose
+            (:mod:`taichi_hair.solvers.rest_curve`).
         pinned: True for a kinematically pinned vertex, bool, shape (N,), or None.
         point_frames: animated positions [units], shape (F, N, 3), dtype of
             ``points``, or None (a time-sampled cache, e.g. USD).
@@ -61,6 +64,7 @@ class Groom:
     region: np.ndarray | None = None
     guide: np.ndarray | None = None
     rest_points: np.ndarray | None = None
+    rest_twist: np.ndarray | None = None
     pinned: np.ndarray | None = None
     point_frames: np.ndarray | None = None
     frame_times: np.ndarray | None = None
@@ -243,6 +247,12 @@ class Groom:
                                  f"got {rp.shape}")
             self.rest_points = rp.astype(pts.dtype, copy=False)
             check_finite("rest_points", self.rest_points, "vertex")
+        if self.rest_twist is not None:
+            rt = np.asarray(self.rest_twist)
+            if rt.shape != (n,) or rt.dtype.kind not in "fiu":
+                raise ValueError(f"Groom: field 'rest_twist' must be numbers of shape ({n},), got {rt.dtype} {rt.shape}")
+            self.rest_twist = rt.astype(np.float64, copy=False)
+            check_finite("rest_twist", self.rest_twist[:, None], "vertex")
         if self.point_frames is not None:
             pf = np.asarray(self.point_frames)
             if pf.ndim != 3 or pf.shape[1:] != pts.shape:

@@ -2,7 +2,7 @@
 
 Members: ``format_version`` (int64 scalar, currently 1), ``points``,
 ``strand_offsets`` and, when set, ``radius``, ``color``, ``region``, ``guide``,
-``rest_points``, ``pinned``, ``point_frames``, ``frame_times``; ``params`` is a
+``rest_points``, ``rest_twist``, ``pinned``, ``point_frames``, ``frame_times``; ``params`` is a
 JSON string, ``units`` a string.  Loading uses ``allow_pickle=False``, and every
 member's declared size is checked against the archive before it is read.
 """
@@ -19,8 +19,8 @@ from .errors import GroomFormatError
 from .groom import Groom
 
 FORMAT_VERSION = 1
-ARRAY_FIELDS = ("points", "strand_offsets", "radius", "color", "region", "guide", "rest_points", "pinned",
-                "point_frames", "frame_times")
+ARRAY_FIELDS = ("points", "strand_offsets", "radius", "color", "region", "guide", "rest_points", "rest_twist",
+                "pinned", "point_frames", "frame_times")
 # Deflate cannot expand data more than ~1032 times; a member claiming more is corrupt.
 MAX_DEFLATE_RATIO = 1100
 

@@ -196,6 +196,7 @@ def _build_groom(path, meta: dict, arrays: dict) -> Groom:
     counts = np.concatenate([p["counts"] for p in parts])
     g = Groom(points=cat("points"), strand_offsets=offsets_from_counts(counts), radius=cat("radius"),
               color=cat("color"), region=cat("region"), guide=cat("guide"), rest_points=cat("rest"),
+              rest_twist=cat("restTwist"),
               pinned=cat("pinned"), point_frames=frames, frame_times=times, params=params, units=units)
     return finish(g, path)
 
@@ -251,6 +252,7 @@ def _check_prim(path, i: int, prim: dict, arrays: dict) -> dict:
         radius = radius * np.float32(0.5)
     return dict(counts=counts, points=points, frames=frames, times=times, radius=radius,
                 rest=sized(f"{i}.pv.rest", "primvars:rest", (n,), 3),
+                restTwist=sized(f"{i}.pv.restTwist", "primvars:restTwist", (n,)),
                 color=sized(f"{i}.pv.displayColor", "primvars:displayColor", (ns, n), 3),
                 region=sized(f"{i}.pv.region", "primvars:region", (ns,)),
                 guide=sized(f"{i}.pv.guide", "primvars:guide", (ns,)),
@@ -291,6 +293,9 @@ def write_usd(groom: Groom, path, prim_path: str = "/Groom/Strands") -> None:
     if g.rest_points is not None:
         pv.CreatePrimvar("rest", T.Point3fArray, UsdGeom.Tokens.vertex).Set(
             Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(g.rest_points, dtype=np.float32)))
+    if g.rest_twist is not None:
+        pv.CreatePrimvar("restTwist", T.DoubleArray, UsdGeom.Tokens.vertex).Set(
+            Vt.DoubleArray.FromNumpy(np.ascontiguousarray(g.rest_twist, dtype=np.float64)))
     if g.color is not None:
         pv.CreatePrimvar("displayColor", T.Color3fArray, interp[g.color.shape[0]]).Set(
             Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(g.color, dtype=np.float32)))

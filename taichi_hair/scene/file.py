@@ -19,7 +19,8 @@ degrees; relative paths are relative to the scene file)::
 
     [groom]                      # either a file ...
     file = "../ponytail/tail.tfx"   # or a list of files, concatenated
-    rest_pose = "authored"       # or "sag-free": rest strains solved so the shape holds under gravity
+    rest_pose = "authored"       # "sag-free": rest strains solved so the shape holds under gravity;
+                                 # "file": the file's rest curve (rest points, e.g. from taichi-hair rest-pose)
     scale = 0.0035               # file units -> metres (or units = "cm" / "mm" / "m" / "in")
     strands = 100                # optional: keep this many strands, evenly spaced through the file
     root = "clamped"             # "clamped" (roots follow `body`) or "free"
@@ -113,7 +114,7 @@ class Scene:
         description: JSON-able description of everything that determines the result
             (checkpoints compare it before resuming).
         model_builder: optional callable returning the Model (the built-in scenes use their own builders).
-        rest_pose: "authored" or "sag-free" ([groom] rest_pose; :mod:`taichi_hair.solvers.rest_pose`).
+        rest_pose: "authored", "sag-free" or "file" ([groom] rest_pose; :mod:`taichi_hair.solvers.rest_pose`).
         rest_pose_result: the :class:`~taichi_hair.solvers.rest_pose.RestPoseResult` of the last
             :meth:`build_model` of a sag-free scene (None otherwise).
     """
@@ -156,7 +157,35 @@ class Scene:
         model = self.model_builder() if self.model_builder is not None else self._build_groom_model()
         if self.rest_pose == "sag-free":
             self.rest_pose_result = self.solve_rest_pose(model)
+        elif self.rest_pose == "file":
+            self.rest_pose_result = self.rest_pose_from_file(model)
         return model
+
+    def _gravity_in_body(self):
+        R, _ = self.body_transforms(0.0)[self.root_body]
+        return np.asarray(R, np.float64).T @ np.asarray(self.gravity, np.float64)
+
+    def rest_pose_from_file(self, model):
+        """Apply the rest curve the groom file carries (``rest_points``, ``rest_twist``: e.g. written by
+        ``taichi-hair rest-pose``) as the rest pose of ``model``; returns its RestPoseResult (residual under
+        this scene's gravity)."""
+        g = self.groom
+        where = f"{self.path or self.name}: [groom] rest_pose"
+        if self.solver != "admm":
+            raise SceneError(f"{where}: 'file' is read into the ADMM model; the scene's solver is {self.solver!r}")
+        if g is None or g.rest_points is None:
+            raise SceneError(f"{where}: 'file' needs a groom file with rest points (rest_points / USD primvars:rest; "
+                             "taichi-hair rest-pose writes them)")
+        from ..solvers.rest_curve import rest_pose_from_curve
+        from ..solvers.rest_pose import apply_rest_pose
+
+        try:
+            result = rest_pose_from_curve(model, g.rest_points, g.rest_twist, self.solver_config,
+                                          gravity=self._gravity_in_body())
+        except ValueError as exc:
+            raise SceneError(f"{where}: {exc}") from None
+        apply_rest_pose(model, result)
+        return result
 
     def solve_rest_pose(self, model):
         """Solve and apply the sag-free rest pose of ``model`` for this scene's solver and gravity (in the
@@ -166,9 +195,7 @@ class Scene:
                              f"model (Discrete Elastic Rods); the scene's solver is {self.solver!r}")
         from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
 
-        R, _ = self.body_transforms(0.0)[self.root_body]
-        g_body = np.asarray(R, np.float64).T @ np.asarray(self.gravity, np.float64)
-        result = solve_rest_pose(model, self.solver_config, gravity=g_body)
+        result = solve_rest_pose(model, self.solver_config, gravity=self._gravity_in_body())
         apply_rest_pose(model, result)
         return result
 

@@ -13,8 +13,9 @@ from .schema import SceneError, Table, at_least, dataclass_from, positive
 
 SOLVERS = ("admm", "shape", "xpbd")
 COLLIDER_TYPES = ("sphere", "capsule", "plane", "mesh")
-#: [groom] rest_pose: "authored" (rest shape = the file's shape) or "sag-free" (solvers/rest_pose.py).
-REST_POSES = ("authored", "sag-free")
+#: [groom] rest_pose: "authored" (rest shape = the file's shape), "sag-free" (solvers/rest_pose.py) or
+#: "file" (the file's rest curve, solvers/rest_curve.py).
+REST_POSES = ("authored", "sag-free", "file")
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 
 
@@ -45,7 +46,8 @@ def subsample_groom(groom, count: int):
     return Groom(points=groom.points[verts], strand_offsets=np.r_[0, np.cumsum(counts)].astype(np.int64),
                  radius=pick(groom.radius), color=pick(groom.color), region=pick(groom.region, False),
                  guide=pick(groom.guide, False), rest_points=None if groom.rest_points is None
-                 else groom.rest_points[verts], pinned=None if groom.pinned is None else groom.pinned[verts],
+                 else groom.rest_points[verts], rest_twist=None if groom.rest_twist is None
+                 else groom.rest_twist[verts], pinned=None if groom.pinned is None else groom.pinned[verts],
                  params=dict(groom.params), units=groom.units).validate()
 
 

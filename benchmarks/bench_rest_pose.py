@@ -1,0 +1,102 @@
+"""Sag-free rest pose (issue 14): how well each groom holds its authored shape, authored vs sag-free.
+
+    python3 benchmarks/bench_rest_pose.py [--frames 48] [--strands 300] [--grooms straight,wavy,curly,ponytail]
+        [--motion still|head_turn] [--out benchmarks/results/rest_pose.json]
+
+For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
+``assets/scenes/ponytail.toml``) with its body still (``--motion still``) or turning, hair-hair and body contacts
+on at the scene's settings, simulated ``--frames`` frames (48 = 2 s) twice through ``taichi-hair simulate``:
+with ``--rest-pose authored`` and ``--rest-pose sag-free``.  Printed and written: the time of the rest
+pose solve, the strands it holds, and the p90 / max vertex drift from the authored shape at the end and over the
+run (the runs' own ``summary.json``: ``quality.drift_*``), the strain and the wall time of each run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+from harness import ROOT, Bench
+
+SCENES = {"ponytail": os.path.join(ROOT, "assets", "scenes", "ponytail.toml")}
+HEAD = os.path.join(ROOT, "assets", "scenes", "head_turn.toml")
+
+
+def scene_text(groom: str, motion: str) -> str:
+    """The TOML of one groom's scene, paths absolute, with the body still or turning."""
+    if groom == "ponytail":
+        src = open(SCENES["ponytail"]).read().replace('"../ponytail/tail.tfx"',
+                                                       json.dumps(os.path.join(ROOT, "assets", "ponytail", "tail.tfx")))
+        bodies = src.index("[[bodies]]")
+        body = '[[bodies]]\npreset = "still"\n' if motion == "still" else \
+            '[[bodies]]\npreset = "head_turn"\namplitude = 40.0\nperiod = 2.0\nstart = 0.25\npivot = [0.0, 0.2, 0.0]\n'
+        return src[:bodies] + body
+    src = open(HEAD).read().replace('generator = "wavy"', f'generator = "{groom}"')
+    src = src.replace('file = "../head.obj"', f'file = {json.dumps(os.path.join(ROOT, "assets", "head.obj"))}')
+    if motion == "still":
+        src = src[:src.index("[[bodies]]")] + '[[bodies]]\npreset = "still"\n'
+    return src
+
+
+def run(groom: str, rest_pose: str, args, work: str) -> dict:
+    path = os.path.join(work, f"{groom}_{args.motion}.toml")
+    with open(path, "w") as fh:
+        fh.write(scene_text(groom, args.motion))
+    out = os.path.join(work, f"{groom}_{rest_pose}")
+    cmd = [sys.executable, "-m", "taichi_hair.cli", "simulate", path, "--rest-pose", rest_pose, "--frames",
+           str(args.frames), "--out", out, "--quiet"]
+    if groom != "ponytail":
+        cmd += ["--strands", str(args.strands)]
+    p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    if p.returncode != 0:
+        return dict(error=(p.stderr or p.stdout)[-600:], returncode=p.returncode)
+    with open(os.path.join(out, "summary.json")) as fh:
+        s = json.load(fh)
+    q = s["quality"]
+    row = dict(strands=s["strands"], vertices=s["vertices"], ms_per_frame=s["ms_per_frame"],
+               drift_p90_last_mm=1e3 * q["drift_p90_last_m"], drift_p90_max_mm=1e3 * q["drift_p90_max_m"],
+               drift_max_mm=1e3 * q["drift_max_m"], strain_p99_max=q["strain_p99_max"], strain_max=q["strain_max"],
+               came_to_rest=q["came_to_rest"])
+    if "rest_pose" in s:
+        r = s["rest_pose"]
+        row.update(rest_pose_seconds=r["seconds"], strands_held=r["strands_held"],
+                   largest_rest_turn=r["largest_rest_turn"])
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=48)
+    ap.add_argument("--strands", type=int, default=300)
+    ap.add_argument("--grooms", default="straight,wavy,curly,ponytail")
+    ap.add_argument("--motion", choices=("still", "head_turn"), default="still")
+    ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
+    args = ap.parse_args(argv)
+    bench = Bench("rest_pose", argv)
+    rows = {}
+    with tempfile.TemporaryDirectory() as work:
+        for groom in args.grooms.split(","):
+            rows[groom] = {rp: run(groom, rp, args, work) for rp in ("authored", "sag-free")}
+            a, b = rows[groom]["authored"], rows[groom]["sag-free"]
+            if "error" in a or "error" in b:
+                print(f"{groom}: failed: {a.get('error') or b.get('error')}")
+                continue
+            ratio = b["drift_p90_last_mm"] / max(a["drift_p90_last_mm"], 1e-12)
+            rows[groom]["ratio_p90_last"] = ratio
+            print(f"{groom:9s} {a['strands']:4d} strands: p90 drift at the end authored {a['drift_p90_last_mm']:8.3f} mm, "
+                  f"sag-free {b['drift_p90_last_mm']:8.3f} mm ({100 * ratio:5.1f} %); max {a['drift_max_mm']:.1f} / "
+                  f"{b['drift_max_mm']:.1f} mm; held {b.get('strands_held')}/{b['strands']} "
+                  f"(solve {b.get('rest_pose_seconds', float('nan')):.2f} s); p99 strain {100 * b['strain_p99_max']:.3f} %; "
+                  f"{b['ms_per_frame']:.0f} ms/frame", flush=True)
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    bench.write(args.out, dict(frames=args.frames, motion=args.motion, grooms=rows))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
