@@ -175,3 +175,46 @@ def solve_local_elasticity(
     for i in x:
         local_elasticity_at(i, measure, use_q, vertex, edge, pair, strand, body_rotation, x, theta, es, buf,
                             damping_scale, weight_floor)
+
+
+@ti.kernel
+def prime_duals(
+    measure: ti.template(),
+    use_q: ti.template(),
+    vertex: ti.template(),
+    edge: ti.template(),
+    pair: ti.template(),
+    strand: ti.template(),
+    body_rotation: ti.template(),
+    x: ti.template(),
+    theta: ti.template(),
+    es: ti.template(),
+    buf: ti.template(),
+    weight_floor: float,
+):
+    """Duals at the ADMM fixed point of the current configuration: with y = Bx, the local step's optimality
+    grad E_i(Bx) + W_y lambda_i = 0 gives lambda_i = -grad E_i / W_y, and the pair's force on the global step
+    W_y lambda_i = -grad E_i (bending J^T K (kappa - kappa_bar), stretch of both edges with the shared-edge
+    halving; damping is zero at rest).  A state that is an equilibrium (a sag-free rest pose) then stays one
+    from the first iteration instead of sagging while the duals build up."""
+    for i in x:
+        if pair.pair_is_active[i] != 0:
+            a = i - 1
+            ea = x[i] - x[a]
+            eb = x[i + 1] - x[i]
+            m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
+            m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
+            twist = theta[i] - theta[a] + es.edge_reference_twist[i]
+            kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
+            J = pair_edge_jacobian(measure, m1a, m2a, ta, ea.norm(), m1b, m2b, tb, eb.norm())
+            g = J.transpose() @ (buf.pair_bend_stiffness[i] * (kappa - buf.pair_rest_kappa[i]))
+            eps_a, ga = stretch_strain(measure, ea, edge.edge_rest_length[a])
+            eps_b, gb = stretch_strain(measure, eb, edge.edge_rest_length[i])
+            sa = buf.edge_pair_stretch_stiffness[a] * eps_a
+            sb = buf.edge_pair_stretch_stiffness[i] * eps_b
+            g += vec6(sa * ga[0], sa * ga[1], sa * ga[2], sb * gb[0], sb * gb[1], sb * gb[2])
+            w = pair_weight(vertex, buf, i, weight_floor)
+            s = vertex.vertex_strand[i]
+            Q = dual_frame(use_q, strand, body_rotation, es, s, i)
+            buf.pair_dual[i] = dual_to_world(-g / w, Q.transpose())
+            buf.pair_force[i] = -g

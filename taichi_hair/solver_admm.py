@@ -67,7 +67,7 @@ import taichi as ti
 from .solver_base import SolverBase
 from . import admm
 from .config import SolverADMMConfig
-from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, solve_local_elasticity
+from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
@@ -417,6 +417,20 @@ class SolverADMM(SolverBase):
         elasticity multipliers and the BDF2 history (:meth:`reset_history`); call it after a teleport
         or after loading another state."""
         admm.reset_duals(self.buf)
+        self.reset_history()
+
+    def prime_duals(self, state: State, control: Control, dt: float | None = None) -> None:
+        """Start the warm-started elasticity duals at the ADMM fixed point of ``state`` (its exact elastic
+        forces, :func:`elasticity.prime_duals`) instead of zero, and forget the BDF2 history.  For a run that
+        starts at an equilibrium (a sag-free rest pose, :mod:`taichi_hair.solvers.rest_pose`): with zero duals
+        the first steps sag while the duals build up (10 iterations per step) and set the groom swinging.
+        ``dt`` [s]: the coming steps' time step (the dynamic mode's weight floor depends on it)."""
+        cfg = self.config
+        floor = cfg.inertia_floor / (dt * dt) if self.dynamic and dt else 0.0
+        self._update_frames(state, control)
+        m = self.model
+        prime_duals(self.measure, self.use_q, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
+                    state.vertex_position, state.edge_twist, state, self.buf, floor)
         self.reset_history()
 
     def reset_history(self) -> None:

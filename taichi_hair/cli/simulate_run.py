@@ -101,6 +101,9 @@ class SimulateRun:
                 self.diverged = f"frame 1: {exc}"
             state.load(snapshot)
             solver.reset_duals()
+            if self.scene.rest_pose != "authored":
+                # The groom starts at an equilibrium: start the duals there too (SolverADMM.prime_duals).
+                solver.prime_duals(state, self.control, self.dt)
             solver.step_count = 0
             solver.iteration_count = 0
             solver.stage_seconds = {k: 0.0 for k in solver.stage_seconds}

@@ -21,7 +21,7 @@ ACTIONS = ("select", "select_ray", "select_strands", "select_all", "simulate", "
     + EDIT_ACTIONS
 #: Parameters whose change updates the Model and solver coefficients (the others apply to the running solver).
 REBUILD_PARAMETERS = ("youngs_modulus", "radius", "density", "guide_ratio", "neighbour_count", "seed", "contacts",
-                      "contact_margin", "w0")
+                      "contact_margin", "w0", "rest_pose")
 #: Of those, the ones that change the simulated layout (which strands are guides, the skinning
 #: slots, the contact pipeline): a new Model and solver are built and Taichi recompiles the kernels.
 #: The others update the Model in place (:meth:`Model.update`, no recompilation).
@@ -59,6 +59,9 @@ class GroomingConfig:
             frames and holds a strand dragged by its tip still; 0.2 settles faster but a strand
             with both ends kinematic keeps oscillating (centimetres) from frame to frame; 5 and
             the dynamic default 25 creep (the sag is half done after 20 frames at 5).
+        rest_pose: ``"authored"`` (the groom's rest shape is its rest state: it sags under gravity) or
+            ``"sag-free"`` (rest strains solved so that the rest shape is an equilibrium under gravity,
+            :mod:`taichi_hair.solvers.rest_pose`; re-solved after every edit of the rest shape).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
         undo_limit: most undo snapshots kept [-].
     """
@@ -75,6 +78,7 @@ class GroomingConfig:
     contacts: bool = True
     contact_margin: float = 1.0e-4
     w0: float = 1.0
+    rest_pose: str = "authored"
     autosave_every: int = 1
     undo_limit: int = 100
 
@@ -108,6 +112,8 @@ class GroomingConfig:
         if not isinstance(self.contacts, (bool, np.bool_)):
             raise ValueError(f"GroomingConfig.contacts must be true or false, got {self.contacts!r}")
         self.contacts = bool(self.contacts)
+        if self.rest_pose not in ("authored", "sag-free"):
+            raise ValueError(f"GroomingConfig.rest_pose must be 'authored' or 'sag-free', got {self.rest_pose!r}")
 
     def to_dict(self) -> dict:
         """JSON-able dict of the fields (gravity as a list)."""

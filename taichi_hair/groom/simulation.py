@@ -25,6 +25,8 @@ records builds (``rebuild``), in-place updates (``update``) and frames.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .config import COMB_BODY
@@ -95,6 +97,9 @@ class GuideSimulation:
 
     Attributes:
         model, solver, state, control: the guides' Model, SolverADMM, State and Control.
+        guides: the groom strand of each Model strand, int64.
+        solver_config: the SolverADMMConfig of the solver, contacts aside (the rest pose is solved for it).
+        rest_pose_result: the RestPoseResult of the sag-free rest pose, None when authored.
         skin: the :class:`SkinningLBS` of every strand, or None when every strand is a guide.
         comb_collider: index of the comb in the solver's ColliderSet [-].
         guide_vertex: groom vertex of each Model vertex, int64 (guide vertex count,).
@@ -118,14 +123,16 @@ class GuideSimulation:
         off = g.strand_offsets
         guide_rest, material = guide_setup(g, cfg, guides)
         model = guide_builder(guide_rest, material).finalize()
+        self.model, self.guides = model, np.asarray(guides)
+        self.solver_config = SolverADMMConfig(iterations=cfg.iterations, mode="quasistatic", w0=cfg.w0)
+        self._solve_rest_pose(cfg)
         # Proximity only (Sec. 5.3): no velocity-dependent margin growth.  The pipeline always exists:
         # it holds the comb, an idle collider on its own body until a stroke enables it.
         contacts = ContactConfig(hair_hair=cfg.contacts, friction=cfg.friction, margin=cfg.contact_margin,
                                  velocity_margin=0.0)
         comb = CapsuleCollider(p0=(0.0, 0.0, 0.0), p1=(0.0, 0.0, 0.0), radius=1.0e-3, friction=0.0, body=COMB_BODY,
                                strands=(0, 1))
-        solver = SolverADMM(model, SolverADMMConfig(iterations=cfg.iterations, mode="quasistatic", w0=cfg.w0,
-                                                    contacts=contacts), colliders=list(colliders) + [comb])
+        solver = SolverADMM(model, replace(self.solver_config, contacts=contacts), colliders=list(colliders) + [comb])
         solver.contacts.colliders.collider_strands[len(colliders)] = [0, 0]  # idle: acts on no strand
         state = model.state()
         control = model.control()
@@ -155,8 +162,11 @@ class GuideSimulation:
         The State is not touched: load it again (:meth:`load_positions`)."""
         g, cfg = groom, config
         guide_rest, material = guide_setup(g, cfg, guides)
+        self.guides = np.asarray(guides)
         host, materials = _host_of(guide_builder(guide_rest, material))
         self.model.update(host, materials)
+        self._solve_rest_pose(cfg)
+        self.apply_live_parameters(cfg)  # (the gravity the rest pose was solved for)
         self.solver.config.w0 = cfg.w0
         self.solver.refresh_model()
         if self.skin is not None:
@@ -166,6 +176,17 @@ class GuideSimulation:
         self.base_fixed = host["vertex_is_fixed"].copy()
         self.base_body = host["vertex_body_position"].copy()
         self.stale = False
+
+    def _solve_rest_pose(self, config) -> None:
+        """With ``config.rest_pose == "sag-free"``: the guides' rest pose solved for the session's gravity
+        (:mod:`taichi_hair.solvers.rest_pose`) and written into the Model; the result in
+        ``rest_pose_result`` (None for an authored rest pose).  Call ``refresh_model`` after it."""
+        self.rest_pose_result = None
+        if config.rest_pose == "sag-free":
+            from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
+
+            self.rest_pose_result = solve_rest_pose(self.model, self.solver_config, gravity=tuple(config.gravity))
+            apply_rest_pose(self.model, self.rest_pose_result)
 
     def apply_live_parameters(self, config) -> None:
         """Gravity, iterations and friction of ``config`` into the running solver."""
@@ -180,6 +201,8 @@ class GuideSimulation:
         self.model.reset_state(self.state)
         self.state.vertex_position.from_numpy(points[self.guide_vertex].astype(self.np_float))
         self.solver.reset_duals()
+        if self.rest_pose_result is not None:  # sag-free: the rest shape is an equilibrium, start the duals there
+            self.solver.prime_duals(self.state, self.control)
 
     def set_kinematics(self, pinned=None, pinned_positions=None, drag_vertices=None, drag_position=None) -> None:
         """Write vertex_is_fixed / vertex_body_position: clamped roots, the pinned groom vertices
