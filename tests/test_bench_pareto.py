@@ -7,8 +7,9 @@ import os
 import numpy as np
 import pytest
 
-from taichi_hair.bench.pareto import (DATA_DIR, SCENES, RunSpec, build_scene, cantilever_error, pareto_front,
-                                      read_csv, run_specs, shake_rotation, trajectory_error)
+from taichi_hair.bench.pareto import cantilever_error, trajectory_error
+from taichi_hair.bench.pareto_data import DATA_DIR, pareto_front, read_csv
+from taichi_hair.bench.pareto_runs import SCENES, RunSpec, build_scene, run_specs, shake_rotation
 
 
 def test_pareto_front_on_known_points():
@@ -90,7 +91,7 @@ def test_shipped_pareto_data():
 
 
 def test_choose_from_measured_points():
-    from taichi_hair.bench.pareto import Point, choose, load_shipped
+    from taichi_hair.bench.pareto_data import Point, choose, load_shipped
 
     pts = [Point("s", "a", "f32", 0.01, 10, 0, 0, "", 1.0, 0.20),
            Point("s", "b", "f32", 0.01, 30, 0, 0, "", 3.0, 0.02),

@@ -246,7 +246,7 @@ def test_equilibrium_refuses_a_dynamic_solver_and_reports_non_convergence():
 
 # --------------------------------------------------------------------------- choice by error or budget
 def _points():
-    from taichi_hair.bench.pareto import Point
+    from taichi_hair.bench.pareto_data import Point
 
     def p(method, cost, err, **kw):
         base = dict(precision="f32", dt=1 / 96, iterations=10, substeps=0, shape_method=0, label="")

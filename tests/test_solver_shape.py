@@ -19,6 +19,7 @@ import taichi as ti
 from taichi_hair import GroomBuilder, SimulationDivergedError
 from taichi_hair import rotation as rot
 from taichi_hair.solvers.shape import constraints as sc
+from taichi_hair.solvers.shape import lengths
 from taichi_hair.contact.colliders import CapsuleCollider, ColliderSet, MeshCollider, PlaneCollider, SphereCollider
 from taichi_hair.solvers.shape.solver import ShapeRegion, SolverShape, SolverShapeConfig
 
@@ -216,7 +217,7 @@ def _eq4(f: ti.template(), stiffness: float, w_prev: float, w_i: float):
 @ti.kernel
 def _length(f: ti.template(), rest: float, w_a: float, w_b: float):
     for _ in range(1):
-        a, b = sc.edge_length_correction(f.a[0], f.a[1], rest, w_a, w_b)
+        a, b = lengths.edge_length_correction(f.a[0], f.a[1], rest, w_a, w_b)
         f.out_a[0] = a
         f.out_a[1] = b
 

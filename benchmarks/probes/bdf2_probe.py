@@ -24,14 +24,15 @@ import taichi as ti  # ti.init is in swing() and atlas() (f64 and f32)
 def swing():
     ti.init(arch=ti.cpu, default_fp=ti.f64, log_level=ti.WARN)
     from taichi_hair.bench import pareto as P
+    from taichi_hair.bench import pareto_runs as PR
 
     import math
 
-    # pareto.RunSpec has no integrator knob: one solver here, the integrator switched between runs.
+    # pareto_runs.RunSpec has no integrator knob: one solver here, the integrator switched between runs.
     from taichi_hair import SolverADMM, SolverADMMConfig
     from taichi_hair.validation.elasticity_params import GRAVITY, HAIR
 
-    model, scene = P.build_scene("swing")
+    model, scene = PR.build_scene("swing")
     rho_a = HAIR["density"] * math.pi * HAIR["radius"] ** 2
     solver = SolverADMM(model, SolverADMMConfig(iterations=10, w0=25.0, air_viscosity=scene.drag_rate * rho_a,
                                                 check_finite=False))
@@ -42,7 +43,7 @@ def swing():
         solver.config.integrator, solver.config.iterations = integrator, iterations
         model.reset_state(state)
         solver.reset_duals()
-        per = int(round(P.SAMPLE_INTERVAL / dt))
+        per = int(round(PR.SAMPLE_INTERVAL / dt))
         out = []
         t0 = time.perf_counter()
         for k in range(int(round(scene.duration / dt))):

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 class MethodChoice:
     """A measured point chosen for a scene, and how it maps to the scene's solver settings."""
 
-    point: object            # taichi_hair.bench.pareto.Point
+    point: object            # taichi_hair.bench.pareto_data.Point
     stand_in: str            # measured scene standing in for the user's
     solver: str              # "admm" | "shape" | "xpbd"
     substeps: int            # solver steps per frame
@@ -52,7 +52,7 @@ def choose_for_scene(points, strand_count: int, vertex_count: int, fps: float, p
 
     Raises ValueError naming what cannot be met and the measured range.
     """
-    from .pareto import choose
+    from .pareto_data import choose
 
     if (max_error is None) == (budget_ms is None):
         raise ValueError("give exactly one of max_error and budget_ms")

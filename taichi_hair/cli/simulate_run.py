@@ -463,7 +463,7 @@ def _apply_method_choice(args, scene, model):
     substeps); ``None`` without those options."""
     if args.max_error is None and args.budget_ms is None:
         return None
-    from ..bench.pareto import load_shipped, read_csv
+    from ..bench.pareto_data import load_shipped, read_csv
     from ..bench.choice import choose_for_scene, solver_config_for
 
     try:

@@ -2,7 +2,9 @@
 with Efficient Hair Style Preservation", as a short sequence of kernel launches.
 
 Per step, ``config.substeps`` times over ``dt / substeps`` (the paper's Algorithm 1 with two stages of
-AMD's TressFX 4 and one of Mueller et al. 2012; kernels in :mod:`taichi_hair.solvers.shape.constraints`):
+AMD's TressFX 4 and one of Mueller et al. 2012; kernels in :mod:`taichi_hair.solvers.shape.integration`,
+:mod:`~taichi_hair.solvers.shape.constraints`, :mod:`~taichi_hair.solvers.shape.lengths` and
+:mod:`~taichi_hair.solvers.shape.collisions`):
 
 1. head transform W_T_H of each strand        -- ``interpolate_body_transforms``,
    ``compute_head_rotations`` (Sec. 3.1), at the end of the substep
@@ -136,6 +138,7 @@ import numpy as np
 import taichi as ti
 
 from ...solver_base import SolverBase
+from . import collisions, integration, lengths
 from . import constraints as sc
 from ...model import Model, _np_float
 from ...state import Control, State
@@ -475,12 +478,12 @@ class SolverShape(SolverBase):
             self.body_translation_begin.copy_from(tr)
             self._has_body_begin = True
         t0 = self._tick()
-        sc.begin_step(x, v, self)
+        integration.begin_step(x, v, self)
         t0 = self._tock("integrate", t0)
         shock = cfg.shock_propagation > 0.0 or math.isfinite(cfg.shock_acceleration_threshold)
         if shock:
-            sc.compute_shock_coefficients(m, self, rot, tr, cfg.shock_propagation,
-                                          min(cfg.shock_acceleration_threshold, 1e30), dt)
+            integration.compute_shock_coefficients(m, self, rot, tr, cfg.shock_propagation,
+                                                   min(cfg.shock_acceleration_threshold, 1e30), dt)
         t0 = self._tock("shock", t0)
         for k in range(1, k_sub + 1):
             self._substep(state, control, k / k_sub, h, shock)
@@ -501,16 +504,16 @@ class SolverShape(SolverBase):
         rot, tr = bodies.body_rotation, bodies.body_translation
         t0 = self._tick()
         # 1-2. Head transforms at the end of the substep, forces and Verlet integration (Sec. 3.1, 3.2).
-        sc.interpolate_body_transforms(self.body_rotation_begin, self.body_translation_begin, control.body_rotation,
-                                       control.body_translation, u, rot, tr)
+        integration.interpolate_body_transforms(self.body_rotation_begin, self.body_translation_begin,
+                                                control.body_rotation, control.body_translation, u, rot, tr)
         sc.compute_head_rotations(m, rot, x, self)
-        sc.begin_substep(x, self)
-        sc.integrate(m, self, rot, tr, ti.math.vec3(*control.gravity), ti.math.vec3(*control.air_velocity),
-                     cfg.air_drag, h, v, x)
+        integration.begin_substep(x, self)
+        integration.integrate(m, self, rot, tr, ti.math.vec3(*control.gravity), ti.math.vec3(*control.air_velocity),
+                              cfg.air_drag, h, v, x)
         t0 = self._tock("integrate", t0)
         # 2b. TressFX's velocity shock propagation: carry the strands with their root's motion.
         if shock:
-            sc.propagate_velocity_shock(m, self, x)
+            integration.propagate_velocity_shock(m, self, x)
         t0 = self._tock("shock", t0)
         # 3. Global shape constraints (Sec. 3.3, Eq. 2).
         if self._any_global:
@@ -521,22 +524,22 @@ class SolverShape(SolverBase):
         t0 = self._tock("local", t0)
         # 5. Edge length constraints, in two batches of disjoint edges (Sec. 5).
         for it in range(self._max_length_iterations):
-            sc.solve_edge_lengths_batch(m, self, 0, it, x)
-            sc.solve_edge_lengths_batch(m, self, 1, it, x)
+            lengths.solve_edge_lengths_batch(m, self, 0, it, x)
+            lengths.solve_edge_lengths_batch(m, self, 1, it, x)
         t0 = self._tock("length", t0)
         # 6. Collision handling (Sec. 3.5), colliders at the end-of-substep body transforms.
         if self.colliders is not None:
             self.colliders.begin_step(bodies)
-            sc.project_collisions(m, self, self.colliders, x)
+            collisions.project_collisions(m, self, self.colliders, x)
         t0 = self._tock("collide", t0)
         # 6b. Exact lengths: follow-the-leader from root to tip, colliders kept.
         if cfg.follow_the_leader:
             cs = self.colliders if self.colliders is not None else self
-            sc.follow_the_leader(self.colliders is not None, m, self, cs, x)
+            lengths.follow_the_leader(self.colliders is not None, m, self, cs, x)
         t0 = self._tock("leader", t0)
         # 7. Velocities for the next Verlet substep (with the follow-the-leader correction).
         s_corr = cfg.length_velocity_correction if cfg.follow_the_leader else 0.0
-        sc.end_substep(m, self, h, s_corr, x, v)
+        integration.end_substep(m, self, h, s_corr, x, v)
         self._tock("end", t0)
 
     def _local_shape_constraints(self, x) -> None:
@@ -558,8 +561,8 @@ class SolverShape(SolverBase):
                 sc.apply_local_shape_constraints_batch(True, m, self, self.vertex_rest_rotation, 1, it, x)
 
     def _non_finite_code(self, state: State) -> int:
-        sc.find_non_finite(self.model, state.vertex_position, state.vertex_velocity, self._bad)
+        integration.find_non_finite(self.model, state.vertex_position, state.vertex_velocity, self._bad)
         return int(self._bad[None])
 
     def _restore_begin(self, state: State) -> None:
-        sc.restore_begin(self, state.vertex_position, state.vertex_velocity)
+        integration.restore_begin(self, state.vertex_position, state.vertex_velocity)
