@@ -1,7 +1,7 @@
 """Sag-free rest pose (issue 14): how well each groom holds its authored shape, authored vs sag-free.
 
     python3 benchmarks/bench_rest_pose.py [--frames 48] [--strands 300] [--grooms straight,wavy,curly,ponytail]
-        [--motion still|head_turn] [--out benchmarks/results/rest_pose.json]
+        [--motion still|head_turn] [--contacts all|body] [--out benchmarks/results/rest_pose.json]
 
 For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
 ``assets/scenes/ponytail.toml``) with its body still (``--motion still``) or turning, hair-hair and body contacts
@@ -26,6 +26,15 @@ SCENES = {"ponytail": os.path.join(ROOT, "assets", "scenes", "ponytail.toml")}
 HEAD = os.path.join(ROOT, "assets", "scenes", "head_turn.toml")
 
 
+def without_hair_contacts(src: str) -> str:
+    """The scene without its [solver.contacts] table (hair-hair contacts off; body colliders stay)."""
+    if "[solver.contacts]" not in src:
+        return src
+    a = src.index("[solver.contacts]")
+    b = src.index("\n[", a + 1)
+    return src[:a] + src[b + 1:]
+
+
 def scene_text(groom: str, motion: str) -> str:
     """The TOML of one groom's scene, paths absolute, with the body still or turning."""
     if groom == "ponytail":
@@ -44,8 +53,11 @@ def scene_text(groom: str, motion: str) -> str:
 
 def run(groom: str, rest_pose: str, args, work: str) -> dict:
     path = os.path.join(work, f"{groom}_{args.motion}.toml")
+    text = scene_text(groom, args.motion)
+    if args.contacts == "body":
+        text = without_hair_contacts(text)
     with open(path, "w") as fh:
-        fh.write(scene_text(groom, args.motion))
+        fh.write(text)
     out = os.path.join(work, f"{groom}_{rest_pose}")
     cmd = [sys.executable, "-m", "taichi_hair.cli", "simulate", path, "--rest-pose", rest_pose, "--frames",
            str(args.frames), "--out", out, "--quiet"]
@@ -91,6 +103,8 @@ def main(argv=None) -> int:
     ap.add_argument("--strands", type=int, default=300)
     ap.add_argument("--grooms", default="straight,wavy,curly,ponytail")
     ap.add_argument("--motion", choices=("still", "head_turn"), default="still")
+    ap.add_argument("--contacts", choices=("all", "body"), default="all",
+                    help="all: the scene's hair-hair and body contacts; body: hair-hair contacts off")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
     args = ap.parse_args(argv)
     bench = Bench("rest_pose", argv)
@@ -111,7 +125,7 @@ def main(argv=None) -> int:
                   f"{b['ms_per_frame']:.0f} ms/frame; held and not flagged: {b.get('held_stable_strands')} strands, "
                   f"p90 drift {b.get('held_stable_drift_p90_last_mm', float('nan')):.3f} mm", flush=True)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    bench.write(args.out, dict(frames=args.frames, motion=args.motion, grooms=rows))
+    bench.write(args.out, dict(frames=args.frames, motion=args.motion, contacts=args.contacts, grooms=rows))
     print(f"wrote {args.out}")
     return 0
 

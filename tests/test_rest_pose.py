@@ -298,3 +298,25 @@ def test_grooming_session_keeps_a_sag_free_groom_through_an_edit_and_a_new_gravi
     r = s.rest_pose_report()
     assert r["drift_p90_m"] < 1e-6 and r["residual_max"] < 1e-9
     assert s.groom.params.get("grooming", {}).get("rest_pose", "sag-free") == "sag-free" or s.config.rest_pose == "sag-free"
+
+
+def test_soft_material_with_rest_length_correction_gets_a_warning_naming_the_strand():
+    """Issue 12 doubt (c): with ContactConfig.correction_lengths='rest' the end-of-step correction would erase the
+    stretch of a material that stretches rho g L / E_s > 1e-3 under its weight: a warning names the strand;
+    hair (E_s = 3 GPa, 1e-6) and correction_lengths='before' get none."""
+    import warnings
+
+    from taichi_hair.config import ContactConfig
+
+    b = GroomBuilder()
+    b.add_strand(wavy(0.06, 25), HAIR)
+    b.add_strand(wavy(0.06, 25) + [0, 0, 0.01], RodMaterial(youngs_modulus_stretch=2e3))
+    soft = b.finalize()
+    with pytest.warns(UserWarning, match="strand 1 stretches"):
+        SolverADMM(soft, SolverADMMConfig(contacts=ContactConfig()))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        SolverADMM(soft, SolverADMMConfig(contacts=ContactConfig(correction_lengths="before")))
+        hb = GroomBuilder()
+        hb.add_strand(wavy(0.06, 25), HAIR)
+        SolverADMM(hb.finalize(), SolverADMMConfig(contacts=ContactConfig()))

@@ -5,6 +5,7 @@ geometric correction (:mod:`taichi_hair.contact.projection`), and owns every con
 and grown when the contact count overflows.
 """
 
+import numpy as np
 import taichi as ti
 
 from .narrow import SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts, write_contacts
@@ -38,6 +39,7 @@ class ContactPipeline:
         self.model = model
         self.config = config
         self.colliders = colliders if colliders is not None else ColliderSet([], model.body_count)
+        _warn_soft_rest_lengths(model, config)
         n = model.vertex_count
         #: Contact radius of each vertex/edge (its strand's radius) [m], shape (vertex_count,).
         self.vertex_radius = ti.field(float, n)
@@ -408,3 +410,33 @@ class ContactPipeline:
                 "correction_sweeps": self.correction_sweeps_last,
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
                 "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped}
+
+
+#: The end-of-step correction's "rest" lengths take the rest length for the length: warn when a material
+#: stretches more than this under its own weight (the root strain rho g L / E_s of a hanging strand) [-].
+SOFT_STRETCH_WARNING = 1.0e-3
+
+
+def _warn_soft_rest_lengths(model, config) -> None:
+    """A warning naming the softest strand when ``correction_lengths="rest"`` would erase a real stretch."""
+    if config.correction_lengths != "rest":
+        return
+    h = model.host
+    le = np.asarray(h["edge_rest_length"], np.float64)
+    real = le > 0
+    strand = h["vertex_strand"]
+    ns = model.strand_count
+    area = np.asarray(h["strand_area"], np.float64)[strand]
+    e_s = np.zeros_like(le)
+    e_s[real] = np.asarray(h["edge_stretch_stiffness"], np.float64)[real] / (area[real] * le[real])
+    length = np.bincount(strand, weights=le, minlength=ns)
+    e_min = np.full(ns, np.inf)
+    np.minimum.at(e_min, strand[real], e_s[real])
+    strain = np.asarray(h["strand_density"], np.float64) * 9.81 * length / e_min
+    s = int(np.argmax(strain))
+    if strain[s] > SOFT_STRETCH_WARNING:
+        import warnings
+
+        warnings.warn(f"strand {s} stretches by {100 * strain[s]:.2g} % under its own weight (rho g L / E_s), but "
+                      "ContactConfig.correction_lengths='rest' holds every edge at its rest length after contacts: "
+                      "use correction_lengths='before' to keep a soft material's stretch", stacklevel=3)
