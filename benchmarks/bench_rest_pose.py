@@ -53,7 +53,7 @@ def scene_text(groom: str, motion: str) -> str:
 
 def run(groom: str, rest_pose: str, args, work: str) -> dict:
     path = os.path.join(work, f"{groom}_{args.motion}.toml")
-    text = scene_text(groom, args.motion)
+    text = scene_text(groom, args.motion).replace("[groom]\n", "[groom]\nrest_pose_check = true\n", 1)
     if args.contacts == "body":
         text = without_hair_contacts(text)
     with open(path, "w") as fh:
@@ -76,8 +76,8 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
     if "rest_pose" in s:
         r = s["rest_pose"]
         row.update(rest_pose_seconds=r["seconds"], strands_held=r["strands_held"],
-                   largest_rest_turn=r["largest_rest_turn"], may_buckle=r.get("may_buckle_count"))
-        # The drift over the strands the solve holds and does not flag as buckling, from the frames.
+                   largest_rest_turn=r["largest_rest_turn"], unstable=r.get("unstable_count"))
+        # The drift over the strands the solve holds and finds stable (check_stability), from the frames.
         import numpy as np
 
         with np.load(os.path.join(out, "frames.npz")) as z:
@@ -88,8 +88,8 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
         if counts.size == 0:
             counts = np.full(s["strands"], s["vertices"] // s["strands"])
         strand = np.repeat(np.arange(counts.size), counts)
-        bad = {d["strand"] for d in r["not_held"]} | {d["strand"] for d in r.get("may_buckle", [])}
-        if r["not_held_count"] <= len(r["not_held"]) and r.get("may_buckle_count", 0) <= len(r.get("may_buckle", [])):
+        bad = {d["strand"] for d in r["not_held"]} | {d["strand"] for d in r.get("unstable", [])}
+        if r["not_held_count"] <= len(r["not_held"]) and r.get("unstable_count", 0) <= len(r.get("unstable", [])):
             ok = ~np.isin(strand, sorted(bad))
             d = np.linalg.norm(x1 - x0, axis=1)[ok]
             row.update(held_stable_strands=int(counts.size - len(bad)),
@@ -122,7 +122,7 @@ def main(argv=None) -> int:
                   f"sag-free {b['drift_p90_last_mm']:8.3f} mm ({100 * ratio:5.1f} %); max {a['drift_max_mm']:.1f} / "
                   f"{b['drift_max_mm']:.1f} mm; held {b.get('strands_held')}/{b['strands']} "
                   f"(solve {b.get('rest_pose_seconds', float('nan')):.2f} s); p99 strain {100 * b['strain_p99_max']:.3f} %; "
-                  f"{b['ms_per_frame']:.0f} ms/frame; held and not flagged: {b.get('held_stable_strands')} strands, "
+                  f"{b['ms_per_frame']:.0f} ms/frame; held and stable: {b.get('held_stable_strands')} strands, "
                   f"p90 drift {b.get('held_stable_drift_p90_last_mm', float('nan')):.3f} mm", flush=True)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     bench.write(args.out, dict(frames=args.frames, motion=args.motion, contacts=args.contacts, grooms=rows))

@@ -2,12 +2,79 @@
 
 Every field carries its unit and meaning; ``__post_init__`` validates so that
 impossible parameters fail early with a message naming the field.
+
+Choices are enums inside (:class:`Mode`, :class:`StrainMeasure`, ...): ``StrEnum`` members, so the strings of
+the TOML / CLI boundary and of Python callers (``SolverADMMConfig(mode="quasistatic")``) are accepted and
+converted once, in ``__post_init__``; a member compares equal to its string and serialises as it (JSON,
+checkpoint fingerprints), and the code inside compares members (``cfg.mode == Mode.QUASISTATIC``: ``==``, so a
+field set to a plain string after construction still compares right).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
+
+
+class StrainMeasure(StrEnum):
+    KORNER = "korner"
+    BERGOU = "bergou"
+
+
+class Mode(StrEnum):
+    DYNAMIC = "dynamic"
+    QUASISTATIC = "quasistatic"
+
+
+class Tridiagonal(StrEnum):
+    AUTO = "auto"
+    THOMAS = "thomas"
+    PCR = "pcr"
+
+
+class DualFrame(StrEnum):
+    ROOT = "root"
+    PAIR = "pair"
+    NONE = "none"
+
+
+class Schedule(StrEnum):
+    AUTO = "auto"
+    STAGE = "stage"
+    STRAND = "strand"
+
+
+class Twist(StrEnum):
+    AUTO = "auto"
+    SOLVE = "solve"
+
+
+class Integrator(StrEnum):
+    BACKWARD_EULER = "backward_euler"
+    BDF2 = "bdf2"
+
+
+class CorrectionLengths(StrEnum):
+    REST = "rest"
+    BEFORE = "before"
+    FREE = "free"
+
+
+class MassSplitting(StrEnum):
+    BATCH = "batch"
+    VERTEX = "vertex"
+    NONE = "none"
+
+
+def as_choice(enum: type, owner: str, name: str, value):
+    """``value`` (a string or a member) as a member of ``enum``, or a ValueError naming ``owner.name`` and the
+    choices."""
+    try:
+        return enum(value)
+    except ValueError:
+        choices = tuple(m.value for m in enum)
+        raise ValueError(f"{owner}.{name} must be one of {choices}, got {value!r}") from None
 
 
 def _check_positive(owner: str, name: str, value: float) -> None:
@@ -78,13 +145,13 @@ class RodMaterial:
         return (c * (1 - l) ** 2, c * (1 + l) ** 2, c * (1 + l * l) / (1 + self.poisson_ratio))
 
 
-STRAIN_MEASURES = ("korner", "bergou")
-MODES = ("dynamic", "quasistatic")
-TRIDIAGONAL_METHODS = ("auto", "thomas", "pcr")
-DUAL_FRAMES = ("root", "pair", "none")
-SCHEDULES = ("auto", "stage", "strand")
-TWIST_MODES = ("auto", "solve")
-INTEGRATORS = ("backward_euler", "bdf2")
+STRAIN_MEASURES = tuple(m.value for m in StrainMeasure)
+MODES = tuple(m.value for m in Mode)
+TRIDIAGONAL_METHODS = tuple(m.value for m in Tridiagonal)
+DUAL_FRAMES = tuple(m.value for m in DualFrame)
+SCHEDULES = tuple(m.value for m in Schedule)
+TWIST_MODES = tuple(m.value for m in Twist)
+INTEGRATORS = tuple(m.value for m in Integrator)
 
 
 @dataclass
@@ -208,13 +275,13 @@ class ContactConfig:
     correction_iterations: int = 10
     capacity_per_vertex: float = 3.0
     continuous_detections: int = 0
-    mass_splitting: str = "batch"
+    mass_splitting: MassSplitting = MassSplitting.BATCH
     relinearize_correction: bool = True
-    correction_lengths: str = "rest"
+    correction_lengths: CorrectionLengths = CorrectionLengths.REST
     correction_max_iterations: int = 40
     correction_tolerance: float = 0.0
     correction_relinearize_every: int = 10
-    correction_mass_splitting: str = "none"
+    correction_mass_splitting: MassSplitting = MassSplitting.NONE
     correction_hair_friction: bool = False
     correction_chebyshev_rho: float = 0.99
     skip_when_apart: bool = True
@@ -238,17 +305,16 @@ class ContactConfig:
         if not (isinstance(self.correction_max_iterations, int) and self.correction_max_iterations >= 0):
             raise ValueError("ContactConfig.correction_max_iterations must be an integer >= 0, got "
                              f"{self.correction_max_iterations!r}")
-        if self.correction_lengths not in ("rest", "before", "free"):
-            raise ValueError("ContactConfig.correction_lengths must be 'rest', 'before' or 'free', got "
-                             f"{self.correction_lengths!r}")
-        if self.correction_mass_splitting not in ("batch", "vertex", "none"):
-            raise ValueError("ContactConfig.correction_mass_splitting must be 'batch', 'vertex' or 'none', got "
-                             f"{self.correction_mass_splitting!r}")
+        self.correction_lengths = as_choice(CorrectionLengths, "ContactConfig", "correction_lengths",
+                                            self.correction_lengths)
+        self.correction_mass_splitting = as_choice(MassSplitting, "ContactConfig", "correction_mass_splitting",
+                                                   self.correction_mass_splitting)
         if not isinstance(self.correction_hair_friction, bool):
             raise ValueError("ContactConfig.correction_hair_friction must be a bool, got "
                              f"{self.correction_hair_friction!r}")
-        if self.mass_splitting not in ("batch", "vertex"):
+        if self.mass_splitting not in (MassSplitting.BATCH, MassSplitting.VERTEX):
             raise ValueError(f"ContactConfig.mass_splitting must be 'batch' or 'vertex', got {self.mass_splitting!r}")
+        self.mass_splitting = MassSplitting(self.mass_splitting)
         if not (math.isfinite(self.capacity_per_vertex) and self.capacity_per_vertex > 0):
             raise ValueError(f"ContactConfig.capacity_per_vertex must be > 0, got {self.capacity_per_vertex!r}")
 
@@ -345,51 +411,41 @@ class SolverADMMConfig:
     """
 
     iterations: int = 10
-    mode: str = "dynamic"
-    strain_measure: str = "korner"
+    mode: Mode = Mode.DYNAMIC
+    strain_measure: StrainMeasure = StrainMeasure.KORNER
     w0: float = 1.0
     inertia_floor: float = 1.0
     voronoi_rescaling: bool = True
-    dual_frame: str = "root"
+    dual_frame: DualFrame = DualFrame.ROOT
     warm_start_duals: bool = True
     air_viscosity: float = 0.0
-    tridiagonal: str = "auto"
-    schedule: str = "auto"
+    tridiagonal: Tridiagonal = Tridiagonal.AUTO
+    schedule: Schedule = Schedule.AUTO
     check_finite: bool = True
     contacts: ContactConfig | None = None
-    twist: str = "auto"
-    integrator: str = "backward_euler"
+    twist: Twist = Twist.AUTO
+    integrator: Integrator = Integrator.BACKWARD_EULER
 
     def __post_init__(self):
-        if self.integrator not in INTEGRATORS:
-            raise ValueError(f"SolverADMMConfig.integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
-        if self.twist not in TWIST_MODES:
-            raise ValueError(f"SolverADMMConfig.twist must be one of {TWIST_MODES}, got {self.twist!r}")
+        owner = "SolverADMMConfig"
+        self.integrator = as_choice(Integrator, owner, "integrator", self.integrator)
+        self.twist = as_choice(Twist, owner, "twist", self.twist)
         if isinstance(self.contacts, dict):
             self.contacts = ContactConfig(**self.contacts)
         if self.contacts is not None and not isinstance(self.contacts, ContactConfig):
             raise ValueError(f"SolverADMMConfig.contacts must be a ContactConfig or None, got {self.contacts!r}")
         if not (isinstance(self.iterations, int) and self.iterations >= 1):
             raise ValueError(f"SolverADMMConfig.iterations must be an integer >= 1, got {self.iterations!r}")
-        if self.mode not in MODES:
-            raise ValueError(f"SolverADMMConfig.mode must be one of {MODES}, got {self.mode!r}")
-        if self.strain_measure not in STRAIN_MEASURES:
-            raise ValueError(
-                f"SolverADMMConfig.strain_measure must be one of {STRAIN_MEASURES}, got {self.strain_measure!r}"
-            )
-        if self.tridiagonal not in TRIDIAGONAL_METHODS:
-            raise ValueError(
-                f"SolverADMMConfig.tridiagonal must be one of {TRIDIAGONAL_METHODS}, got {self.tridiagonal!r}"
-            )
-        if self.schedule not in SCHEDULES:
-            raise ValueError(f"SolverADMMConfig.schedule must be one of {SCHEDULES}, got {self.schedule!r}")
+        self.mode = as_choice(Mode, owner, "mode", self.mode)
+        self.strain_measure = as_choice(StrainMeasure, owner, "strain_measure", self.strain_measure)
+        self.tridiagonal = as_choice(Tridiagonal, owner, "tridiagonal", self.tridiagonal)
+        self.schedule = as_choice(Schedule, owner, "schedule", self.schedule)
         if self.schedule == "strand" and self.tridiagonal == "pcr":
             raise ValueError(
                 "SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule='strand' "
                 "(the strand schedule solves each strand with Thomas); use schedule='stage' or 'auto'"
             )
-        if self.dual_frame not in DUAL_FRAMES:
-            raise ValueError(f"SolverADMMConfig.dual_frame must be one of {DUAL_FRAMES}, got {self.dual_frame!r}")
+        self.dual_frame = as_choice(DualFrame, owner, "dual_frame", self.dual_frame)
         _check_positive("SolverADMMConfig", "w0", self.w0)
         if not (isinstance(self.inertia_floor, (int, float)) and math.isfinite(self.inertia_floor)
                 and self.inertia_floor >= 0):

@@ -66,7 +66,7 @@ import taichi as ti
 
 from .solver_base import SolverBase
 from . import admm
-from .config import SolverADMMConfig
+from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
@@ -104,16 +104,16 @@ class SolverADMM(SolverBase):
         self.config = config or SolverADMMConfig()
         cfg = self.config
         h = model.host
-        if cfg.mode == "quasistatic":
+        if cfg.mode == Mode.QUASISTATIC:
             free = np.where(h["strand_body"] < 0)[0]
             if free.size:
                 raise ValueError(
                     f"strand {int(free[0])}: field 'root' is 'free', but the quasistatic mode needs every strand "
                     "clamped (a free strand has no equilibrium under gravity)")
-        self.dynamic = cfg.mode == "dynamic"
-        self.measure = KORNER if cfg.strain_measure == "korner" else BERGOU
+        self.dynamic = cfg.mode == Mode.DYNAMIC
+        self.measure = KORNER if cfg.strain_measure == StrainMeasure.KORNER else BERGOU
         self.with_ref_twist = self.measure == BERGOU
-        self.use_q = {"none": FRAME_NONE, "root": FRAME_ROOT, "pair": FRAME_PAIR}[cfg.dual_frame]
+        self.use_q = {DualFrame.NONE: FRAME_NONE, DualFrame.ROOT: FRAME_ROOT, DualFrame.PAIR: FRAME_PAIR}[cfg.dual_frame]
         self.buf = SolverBuffers(model.vertex_count)
         self._bad = ti.field(ti.i32, ())
         self._diag_kappa = ti.Vector.field(3, float, model.vertex_count)
@@ -126,16 +126,16 @@ class SolverADMM(SolverBase):
         arch = ti.lang.impl.current_cfg().arch
         gpu = arch in _GPU_ARCHS
         schedule = cfg.schedule
-        if schedule == "auto":
-            schedule = "stage" if gpu or cfg.tridiagonal == "pcr" else "strand"
-        elif schedule == "strand" and cfg.tridiagonal == "pcr":
+        if schedule == Schedule.AUTO:
+            schedule = Schedule.STAGE if gpu or cfg.tridiagonal == Tridiagonal.PCR else Schedule.STRAND
+        elif schedule == Schedule.STRAND and cfg.tridiagonal == Tridiagonal.PCR:
             raise ValueError(
                 "SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule='strand' "
                 "(the strand schedule solves each strand with Thomas)")
         #: Resolved schedule: "stage" or "strand".
         self.schedule = schedule
         method = cfg.tridiagonal
-        if schedule == "strand":
+        if schedule == Schedule.STRAND:
             method = "thomas"
         elif method == "auto":
             method = "pcr" if gpu else "thomas"
@@ -179,10 +179,10 @@ class SolverADMM(SolverBase):
         moment = h.get("pair_rest_moment")
         if moment is not None and h.get("rest_pose_measure") != cfg.strain_measure:
             raise ValueError(f"the groom's sag-free rest pose was solved for the strain measure "
-                             f"{h.get('rest_pose_measure')!r}, the solver uses {cfg.strain_measure!r}: solve it again "
+                             f"'{h.get('rest_pose_measure')}', the solver uses '{cfg.strain_measure}': solve it again "
                              "(solvers.rest_pose.solve_rest_pose) with this solver's config")
         # Model no more than the scene needs (frames.twist_choice): the twist unknowns of straight round rods.
-        if cfg.twist == "solve":
+        if cfg.twist == Twist.SOLVE:
             self.twist_free, why = False, "twist solved (SolverADMMConfig.twist='solve')"
         elif moment is not None and np.any(moment != 0.0):
             # A curved rest shape couples twist and bending: dropping the twist would not be exact.
@@ -236,7 +236,7 @@ class SolverADMM(SolverBase):
         self._check_dt(dt)
         m, b, cfg = self.model, self.buf, self.config
         dyn = self.dynamic
-        bdf2_run = dyn and cfg.integrator == "bdf2"
+        bdf2_run = dyn and cfg.integrator == Integrator.BDF2
         # BDF2 needs the last step's state at the same dt; otherwise a backward Euler step.
         bdf2 = bdf2_run and self._history_dt == dt
         self._history_dt = None  # until this step has completed
@@ -269,14 +269,14 @@ class SolverADMM(SolverBase):
         self._update_frames(state, control)
         t0 = self._tock("frames", t0)
 
-        if self.schedule == "strand" and con is None:
+        if self.schedule == Schedule.STRAND and con is None:
             # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
             admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                    control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
                                    v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations, weight_floor)
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
-        elif self.schedule == "strand":
+        elif self.schedule == Schedule.STRAND:
             ccd_at = self._continuous_iterations()
             for it in range(cfg.iterations):
                 if it in ccd_at:
@@ -381,7 +381,7 @@ class SolverADMM(SolverBase):
         rep = dict(self.model_choices)
         rep["mode"] = ("quasistatic: inertia and damping dropped" if not self.dynamic
                        else "dynamic (BDF2, backward Euler on steps without history)"
-                       if self.config.integrator == "bdf2" else "dynamic (backward Euler)")
+                       if self.config.integrator == Integrator.BDF2 else "dynamic (backward Euler)")
         con = self.contacts
         if con is None:
             rep["contacts"] = "no contacts"
@@ -420,7 +420,7 @@ class SolverADMM(SolverBase):
         self.reset_history()
 
     def prime_duals(self, state: State, control: Control, dt: float | None = None) -> None:
-        """Start the warm-started elasticity duals at the ADMM fixed point of ``state`` (its exact elastic
+        """Start the warm-started elasticity duals at the ADMM fixed point of ``state`` (its exact bending
         forces, :func:`elasticity.prime_duals`) instead of zero, and forget the BDF2 history.  For a run that
         starts at an equilibrium (a sag-free rest pose, :mod:`taichi_hair.solvers.rest_pose`): with zero duals
         the first steps sag while the duals build up (10 iterations per step) and set the groom swinging.

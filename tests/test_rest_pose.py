@@ -248,7 +248,7 @@ def test_rest_pose_command_writes_a_rest_curve_that_a_scene_reads_back_as_an_equ
 
 def test_primed_duals_keep_a_sag_free_strand_still_in_the_dynamic_mode():
     """Dynamic ADMM (dt = 1/96 s, 2 s) from a sag-free equilibrium: with the duals primed at the fixed point
-    (SolverADMM.prime_duals) no vertex moves more than 1 um (measured 0.14 um, float32); with zero duals the
+    (SolverADMM.prime_duals) no vertex moves more than 1 um (measured 0.34 um, float32); with zero duals the
     first steps sag while the duals build up (measured 117 um), the transient the priming removes."""
     b = GroomBuilder()
     b.add_strand(horizontal(0.05, 21), HAIR)
@@ -320,3 +320,26 @@ def test_soft_material_with_rest_length_correction_gets_a_warning_naming_the_str
         hb = GroomBuilder()
         hb.add_strand(wavy(0.06, 25), HAIR)
         SolverADMM(hb.finalize(), SolverADMMConfig(contacts=ContactConfig()))
+
+
+def test_stability_check_finds_an_upright_strand_above_its_self_weight_buckling_length():
+    """A straight upright strand is an equilibrium with no rest moment at all (held), but above Greenhill's
+    self-weight buckling length L_c = 1.986 (E I / (rho A g))^(1/3) (8.6 cm for human hair, R = 37 um) it is an
+    unstable one: check_stability (1 s without contacts, 1 um perturbation) flags the 15 cm strand (falls by
+    more than 1 mm) and neither the 4 cm upright one nor a short horizontal one."""
+    from taichi_hair.solvers.rest_pose import check_stability
+
+    up = lambda L, n: np.c_[np.zeros(n), np.linspace(0.0, L, n), np.zeros(n)]  # noqa: E731
+    b = GroomBuilder()
+    b.add_strand(up(0.15, 31), HAIR)
+    b.add_strand(up(0.04, 9) + [0.02, 0, 0], HAIR)
+    b.add_strand(horizontal(0.03, 13) + [0, 0, 0.02], HAIR)
+    model = b.finalize()
+    cfg = SolverADMMConfig()
+    res = solve_rest_pose(model, cfg)
+    assert not res.unheld
+    apply_rest_pose(model, res)
+    check_stability(model, res, cfg)
+    assert [s for s, _ in res.unstable] == [0], (res.unstable, res.strand_stability_drift)
+    assert res.strand_stability_drift[1] < 1e-4 and res.strand_stability_drift[2] < 1e-4
+    assert "unstable" in res.summary()

@@ -121,6 +121,10 @@ def cmd_rest_pose(args) -> int:
     res = solve_rest_pose(model, SolverADMMConfig(), gravity=tuple(args.gravity),
                           config=RestPoseConfig(max_rest_change=args.max_rest_change))
     apply_rest_pose(model, res)
+    if not args.no_check:
+        from ..solvers.rest_pose import check_stability
+
+        check_stability(model, res, SolverADMMConfig(), gravity=tuple(args.gravity))
     xr, tw = rest_curve(model, res.pair_rest_strain, res.edge_rest_length)
     rest = g.points.astype(np.float64).copy()
     twist = np.zeros(g.vertex_count)
@@ -136,6 +140,7 @@ def cmd_rest_pose(args) -> int:
     params["rest_pose"] = dict(kind="sag-free", solver="admm", strain_measure=res.measure,
                                gravity=list(map(float, args.gravity)), held=res.held_count,
                                strands=g.strand_count, not_held=[s for s, _ in unheld][:1000],
+                               unstable=[int(kept[s]) for s, _ in res.unstable][:1000],
                                largest_rest_turn=float(res.strand_rest_turn.max()))
     from dataclasses import replace
 
@@ -149,6 +154,8 @@ def cmd_rest_pose(args) -> int:
         print(f"  strand {s}: {why}")
     if len(unheld) > args.list:
         print(f"  ... {len(unheld) - args.list} more (all in {args.out}'s params['rest_pose']['not_held'])")
+    for s, why in res.unstable[:args.list]:
+        print(f"  strand {int(kept[s])} (held, unstable): {why}")
     for line in body_lines:
         print(f"warning: {line}", file=sys.stderr)
     print(f"wrote {args.out} (points: the authored shape; rest_points, rest_twist: the sag-free rest curve)")
@@ -156,7 +163,9 @@ def cmd_rest_pose(args) -> int:
         with open(args.report, "w") as fh:
             json.dump(dict(groom=args.groom, out=args.out, strands=g.strand_count, held=res.held_count,
                            seconds=res.seconds, largest_rest_turn=float(res.strand_rest_turn.max()),
-                           not_held=[dict(strand=s, why=w) for s, w in unheld], body=body_lines), fh, indent=1)
+                           not_held=[dict(strand=s, why=w) for s, w in unheld],
+                           unstable=[dict(strand=int(kept[s]), why=w) for s, w in res.unstable], body=body_lines),
+                      fh, indent=1)
     return 0
 
 
@@ -175,6 +184,9 @@ def register(sub) -> None:
     p.add_argument("--max-rest-change", type=float, default=1.0,
                    help="largest change of a rest strain |kappa_bar - kappa| a held strand may need (default 1.0, "
                         "about 60 degrees per vertex)")
+    p.add_argument("--no-check", action="store_true",
+                   help="skip the stability check (a 1 s dynamic run without contacts that finds the held strands "
+                        "whose equilibrium is unstable)")
     p.add_argument("--list", type=int, default=10, help="strands not held to name on stdout (default 10)")
     p.add_argument("--report", default=None, help="also write a JSON report here")
     p.add_argument("--arch", default="cpu", help="Taichi arch: cpu (default), cuda, gpu, vulkan")

@@ -392,7 +392,8 @@ def _rest_pose_report(r) -> dict:
                 largest_rest_turn=float(r.strand_rest_turn.max()),
                 largest_residual_over_weight=float(res.max()) if res.size else None, seconds=r.seconds,
                 not_held=[dict(strand=s, why=why) for s, why in r.unheld[:10000]], not_held_count=len(r.unheld),
-                may_buckle=[dict(strand=s, why=why) for s, why in r.unstable[:10000]], may_buckle_count=len(r.unstable))
+                stability_checked=r.strand_stability_drift is not None,
+                unstable=[dict(strand=s, why=why) for s, why in r.unstable[:10000]], unstable_count=len(r.unstable))
 
 
 def _run_quality(rows, eq) -> dict:

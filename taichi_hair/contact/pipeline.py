@@ -8,6 +8,8 @@ and grown when the contact count overflows.
 import numpy as np
 import taichi as ti
 
+from ..config import CorrectionLengths, MassSplitting
+
 from .narrow import SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts, write_contacts
 
 #: Edge-length passes that end the length-holding correction (``ContactPipeline.correct``), before each
@@ -171,7 +173,7 @@ class ContactPipeline:
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                        dt, gn, dynamic, 0, cfg.mass_splitting == "batch")
+                        dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH)
         self.detections += 1
         # Per-step statistics of the continuous passes of this step.
         self.continuous_contacts = 0
@@ -216,7 +218,7 @@ class ContactPipeline:
         added = total - first
         if added > 0:
             build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                            self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == "batch")
+                            self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == MassSplitting.BATCH)
         self.continuous_contacts += added
         return added
 
@@ -311,15 +313,16 @@ class ContactPipeline:
 
         m = self.model
         cfg = self.config
-        hold = cfg.correction_lengths != "free"
-        split = {"batch": True, "vertex": False, "none": SPLIT_NONE}[cfg.correction_mass_splitting]
+        hold = cfg.correction_lengths != CorrectionLengths.FREE
+        split = {MassSplitting.BATCH: True, MassSplitting.VERTEX: False, MassSplitting.NONE: SPLIT_NONE}[
+            cfg.correction_mass_splitting]
         frictionless = not cfg.correction_hair_friction
         every = cfg.correction_relinearize_every if cfg.relinearize_correction else 0
         if cfg.relinearize_correction:
             # (Without it the correction keeps the detection's D_hat and friction coefficients.)
             relinearize_contacts(x, x0, self.vertex_radius, self.colliders, self.con, split, frictionless)
         if hold:
-            store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == "rest")
+            store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
         projection_begin(x, self.con, True)
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else self.max_radius
         cap = max(sweeps, cfg.correction_max_iterations)
@@ -419,7 +422,7 @@ SOFT_STRETCH_WARNING = 1.0e-3
 
 def _warn_soft_rest_lengths(model, config) -> None:
     """A warning naming the softest strand when ``correction_lengths="rest"`` would erase a real stretch."""
-    if config.correction_lengths != "rest":
+    if config.correction_lengths != CorrectionLengths.REST:
         return
     h = model.host
     le = np.asarray(h["edge_rest_length"], np.float64)

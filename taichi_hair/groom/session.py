@@ -46,11 +46,10 @@ new Model and solver (:mod:`taichi_hair.groom.simulation`).  ``session.timings``
 (``rebuild``), in-place updates (``update``) and frames.
 
 With ``guide_ratio < 1`` a selected vertex of a skinned strand acts through its *proxy*: the vertex of the
-nearest guide (by root) at the nearest rest arc fraction; pins and drags move guides, and skinned strands
-follow them.
+nearest guide (by root) at the nearest rest arc fraction; pins and drags move guides, skinned strands follow.
 
-Points on a guide strand are written back from the solver's State, whose precision is Taichi's
-``default_fp``; the groom keeps its own dtype.
+Points on a guide strand are written back from the solver's State (Taichi's ``default_fp``); the groom
+keeps its own dtype.  ``GroomingConfig.rest_pose = "sag-free"`` keeps the rest shape an equilibrium.
 
 The session composes collaborators that never call back into it (they get what they need as arguments and
 return results; :mod:`taichi_hair.groom` lists them) and owns the live simulation
@@ -512,8 +511,7 @@ class GroomingSession:
 
         def apply():
             self.config = new
-            if name in REBUILD_PARAMETERS or (name == "gravity" and new.rest_pose == "sag-free"):
-                # (a sag-free rest pose is solved for the gravity: a new gravity re-solves it, in place)
+            if name in REBUILD_PARAMETERS or (name == "gravity" and new.rest_pose == "sag-free"):  # (re-solved)
                 self._invalidate(layout=name in LAYOUT_PARAMETERS)
             elif self._sim is not None:
                 self._sim.apply_live_parameters(self.config)
@@ -552,25 +550,9 @@ class GroomingSession:
         self._record("advance", frames=frames)
 
     def rest_pose_report(self) -> dict:
-        """How well the guides hold their rest shape: the equilibrium residual of the Model (largest unbalanced
-        vertex force over the strand's weight: round-off when sag-free, ~1 when authored), the strands the
-        sag-free solve holds, and the drift of the current pose from the rest shape (p90 and max over the free
-        guide vertices [m]); builds the simulation if needed."""
-        from ..solvers.rest_pose import equilibrium_residual
-
+        """Equilibrium residual, strands held, drift of the guides (:meth:`GuideSimulation.rest_pose_report`)."""
         self._ensure_built()
-        sim = self._sim
-        res = equilibrium_residual(sim.model, sim.solver_config, gravity=tuple(self.config.gravity))
-        free = sim.model.host["vertex_is_fixed"] == 0
-        rows = sim.guide_vertex[free]
-        d = np.linalg.norm(self.groom.points[rows].astype(np.float64) - self.groom.rest_points[rows], axis=1)
-        r = sim.rest_pose_result
-        return dict(rest_pose=self.config.rest_pose, guides=int(sim.model.strand_count),
-                    residual_max=float(np.nanmax(res)), residual_p50=float(np.nanmedian(res)),
-                    strands_held=None if r is None else r.held_count,
-                    not_held=[] if r is None else [int(sim.guides[s]) for s, _ in r.unheld],
-                    drift_p90_m=float(np.percentile(d, 90)) if d.size else 0.0,
-                    drift_max_m=float(d.max()) if d.size else 0.0)
+        return self._sim.rest_pose_report(self.groom, self.config)
 
     # ------------------------------------------------------------------ the simulation objects
     def _invalidate(self, layout: bool = True) -> None:

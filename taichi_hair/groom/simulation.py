@@ -242,3 +242,22 @@ class GuideSimulation:
             pts = points.copy()
         pts[self.guide_vertex] = x.astype(pts.dtype)
         return pts
+
+    def rest_pose_report(self, groom, config) -> dict:
+        """The equilibrium residual of the guides' Model under ``config.gravity`` (largest unbalanced vertex
+        force over the strand's weight: round-off when sag-free, ~1 when authored), the strands the sag-free
+        solve holds (groom indices of those it does not), and the drift of ``groom.points`` from
+        ``groom.rest_points`` over the free guide vertices (p90 and max) [m]."""
+        from ..solvers.rest_pose import equilibrium_residual
+
+        res = equilibrium_residual(self.model, self.solver_config, gravity=tuple(config.gravity))
+        rows = self.guide_vertex[self.model.host["vertex_is_fixed"] == 0]
+        d = np.linalg.norm(groom.points[rows].astype(np.float64) - groom.rest_points[rows], axis=1)
+        r = self.rest_pose_result
+        return dict(rest_pose=config.rest_pose, guides=int(self.model.strand_count),
+                    residual_max=float(np.nanmax(res)), residual_p50=float(np.nanmedian(res)),
+                    strands_held=None if r is None else r.held_count,
+                    not_held=[] if r is None else [int(self.guides[s]) for s, _ in r.unheld],
+                    may_buckle=[] if r is None else [int(self.guides[s]) for s, _ in r.unstable],
+                    drift_p90_m=float(np.percentile(d, 90)) if d.size else 0.0,
+                    drift_max_m=float(d.max()) if d.size else 0.0)

@@ -21,6 +21,7 @@ degrees; relative paths are relative to the scene file)::
     file = "../ponytail/tail.tfx"   # or a list of files, concatenated
     rest_pose = "authored"       # "sag-free": rest strains solved so the shape holds under gravity;
                                  # "file": the file's rest curve (rest points, e.g. from taichi-hair rest-pose)
+    rest_pose_check = false      # sag-free: also find the held strands that are unstable equilibria (a 1 s run)
     scale = 0.0035               # file units -> metres (or units = "cm" / "mm" / "m" / "in")
     strands = 100                # optional: keep this many strands, evenly spaced through the file
     root = "clamped"             # "clamped" (roots follow `body`) or "free"
@@ -197,6 +198,10 @@ class Scene:
 
         result = solve_rest_pose(model, self.solver_config, gravity=self._gravity_in_body())
         apply_rest_pose(model, result)
+        if self.description.get("groom", {}).get("rest_pose_check"):
+            from ..solvers.rest_pose import check_stability
+
+            check_stability(model, result, self.solver_config, gravity=self._gravity_in_body())
         return result
 
     def _build_groom_model(self):

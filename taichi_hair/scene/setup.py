@@ -62,6 +62,9 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
     rest_pose = t.get("rest_pose", "str", "authored", lambda v: None if v in REST_POSES else
                       f"must be one of {', '.join(REST_POSES)}, got {v!r}")
     rest_pose = overrides.get("rest_pose", rest_pose)
+    check = t.get("rest_pose_check", "bool", False)
+    if check:
+        desc["rest_pose_check"] = True
     desc.update(root=root, body=body)
     if rest_pose != "authored":  # (absent from the description otherwise: old checkpoints still resume)
         desc["rest_pose"] = rest_pose

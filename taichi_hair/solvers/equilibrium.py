@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import Mode
+
 
 @dataclass
 class EquilibriumResult:
@@ -44,7 +46,7 @@ def equilibrium(solver, state, control, tolerance: float, max_steps: int = 2000,
     d_k are both below ``tolerance`` (an estimate: it assumes the linear convergence ADMM shows near the
     solution).  ``callback(step, displacement)`` is called after each step (progress bars).
     """
-    if solver.config.mode != "quasistatic":
+    if solver.config.mode != Mode.QUASISTATIC:
         raise ValueError("equilibrium: the solver must be in the quasistatic mode (SolverADMMConfig.mode)")
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"equilibrium: tolerance must be a finite positive length [m], got {tolerance!r}")

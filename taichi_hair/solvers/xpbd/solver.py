@@ -89,12 +89,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 import taichi as ti
 
 from . import constraints as xc
 from ...admm import find_non_finite
+from ...config import Schedule, as_choice
 from ...solver_base import SolverBase
 from ...frames import update_reference_frames
 from ...model import Model, _np_float
@@ -103,12 +105,17 @@ from ...state import Control, State
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
-FRAME_INERTIAS = ("segment", "section")
+class FrameInertia(StrEnum):
+    SEGMENT = "segment"
+    SECTION = "section"
+
+
+FRAME_INERTIAS = tuple(m.value for m in FrameInertia)
 #: Up to this many iterations a substep is one kernel launch with the sweeps unrolled (compile time grows
 #: with the count); beyond, one launch per sweep.
 _FUSED_ITERATIONS = 2
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
-SCHEDULES = ("auto", "stage", "strand")
+SCHEDULES = tuple(m.value for m in Schedule)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
 
@@ -158,9 +165,9 @@ class SolverXPBDConfig:
     air_viscosity: float = 0.0
     strain_rate_damping: bool = False
     voronoi_rescaling: bool = True
-    frame_inertia: str = "segment"
+    frame_inertia: FrameInertia = FrameInertia.SEGMENT
     frame_inertia_scale: float = 1.0
-    schedule: str = "auto"
+    schedule: Schedule = Schedule.AUTO
     check_finite: bool = True
 
     def __post_init__(self):
@@ -177,11 +184,8 @@ class SolverXPBDConfig:
             if not isinstance(v, bool):
                 raise ValueError(f"SolverXPBDConfig.{name} must be a bool, got {v!r}")
         _check_positive("frame_inertia_scale", self.frame_inertia_scale)
-        if self.schedule not in SCHEDULES:
-            raise ValueError(f"SolverXPBDConfig.schedule must be one of {SCHEDULES}, got {self.schedule!r}")
-        if self.frame_inertia not in FRAME_INERTIAS:
-            raise ValueError(f"SolverXPBDConfig.frame_inertia must be one of {FRAME_INERTIAS}, "
-                             f"got {self.frame_inertia!r}")
+        self.schedule = as_choice(Schedule, "SolverXPBDConfig", "schedule", self.schedule)
+        self.frame_inertia = as_choice(FrameInertia, "SolverXPBDConfig", "frame_inertia", self.frame_inertia)
 
 
 def _check_positive(name: str, value) -> None:
@@ -258,8 +262,8 @@ class SolverXPBD(SolverBase):
         if not isinstance(self.config, SolverXPBDConfig):
             raise ValueError(f"SolverXPBD: config must be a SolverXPBDConfig, got {type(self.config).__name__}")
         schedule = self.config.schedule
-        if schedule == "auto":
-            schedule = "stage" if ti.lang.impl.current_cfg().arch in _GPU_ARCHS else "strand"
+        if schedule == Schedule.AUTO:
+            schedule = Schedule.STAGE if ti.lang.impl.current_cfg().arch in _GPU_ARCHS else Schedule.STRAND
         #: Resolved schedule: "stage" (one launch per substep, parallel over vertices) or "strand".
         self.schedule = schedule
         self.buf = XPBDBuffers(model.vertex_count)
@@ -281,7 +285,7 @@ class SolverXPBD(SolverBase):
         f = _np_float()
         b = self.buf
         b.vertex_inverse_mass.from_numpy(np.where(h["vertex_is_fixed"] != 0, 0.0, 1.0 / h["vertex_mass"]).astype(f))
-        if cfg.frame_inertia == "segment":
+        if cfg.frame_inertia == FrameInertia.SEGMENT:
             inertia = h["strand_density"][strand] * h["strand_area"][strand] * le**3 / 12.0
         else:
             inertia = h["edge_rotational_inertia"]
@@ -338,10 +342,10 @@ class SolverXPBD(SolverBase):
         damping = 1.0 / dts  # gamma = tau / dt_s, tau stored per constraint
         decay = math.exp(-cfg.damping * dts)
         xc.begin_step(m.vertex, m.edge, m.strand, control.body_rotation, control.body_translation, state, state, b)
-        if self.schedule == "strand":
+        if self.schedule == Schedule.STRAND:
             xc.substeps_strand(m.vertex, m.edge, m.pair, m.strand, state, b, g, v_air, cfg.air_viscosity, dts, dts * dts, n_sub,
                                cfg.iterations, damping, decay)
-        for k in range(n_sub if self.schedule == "stage" else 0):
+        for k in range(n_sub if self.schedule == Schedule.STAGE else 0):
             fraction = (k + 1) / n_sub
             if cfg.iterations <= _FUSED_ITERATIONS:
                 # (a-c) in one launch, the sweeps unrolled.
