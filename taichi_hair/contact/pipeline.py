@@ -324,7 +324,7 @@ class ContactPipeline:
         if hold:
             store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
         projection_begin(x, self.con, True)
-        tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else self.max_radius
+        tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else 0.25 * self.max_radius
         cap = max(sweeps, cfg.correction_max_iterations)
         rho = cfg.correction_chebyshev_rho
         if rho > 0 and self._cheb is None:
