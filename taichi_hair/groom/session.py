@@ -48,12 +48,11 @@ new Model and solver (:mod:`taichi_hair.groom.simulation`).  ``session.timings``
 With ``guide_ratio < 1`` a selected vertex of a skinned strand acts through its *proxy*: the vertex of the
 nearest guide (by root) at the nearest rest arc fraction; pins and drags move guides, skinned strands follow.
 
-Points on a guide strand are written back from the solver's State (Taichi's ``default_fp``); the groom
-keeps its own dtype.  ``GroomingConfig.rest_pose = "sag-free"`` keeps the rest shape an equilibrium.
+Guide points come back from the solver's State (Taichi's ``default_fp``); the groom keeps its dtype.
+``GroomingConfig.rest_pose = "sag-free"`` keeps the rest shape an equilibrium.
 
 The session composes collaborators that never call back into it (they get what they need as arguments and
-return results; :mod:`taichi_hair.groom` lists them) and owns the live simulation
-(:class:`~taichi_hair.groom.simulation.GuideSimulation`).
+return results; :mod:`taichi_hair.groom` lists them) and owns the live simulation (``GuideSimulation``).
 """
 
 from __future__ import annotations
