@@ -110,26 +110,33 @@ class Model:
         return list(zip(self.host["strand_vertex_start"].tolist(), self.host["strand_vertex_count"].tolist()))
 
     def pair_voronoi_length(self, rescaling: bool) -> np.ndarray:
-        """Bending Voronoi length of every pair [m] (host, float64), shape (vertex_count,), 1 where inactive.
+        """Bending Voronoi length of every pair [m] (host, float64), shape (vertex_count,), 1 where inactive:
+        :func:`pair_voronoi_length` of the Model's host arrays.  The one definition SolverADMM, SolverXPBD and
+        the sag-free rest pose use."""
+        return pair_voronoi_length(self.host, rescaling)
 
-        Pair i (vertices i-1, i, i+1) owns half of each of its two edges; with ``rescaling`` (Daviet 2023
-        Sec. 5.1, ``voronoi_rescaling`` of the solver configs) the second and penultimate vertices of a strand
-        own the whole boundary edge instead of half of it.  The one definition both SolverADMM and SolverXPBD
-        use.
-        """
-        h = self.host
-        n = self.vertex_count
-        le = h["edge_rest_length"]
-        local = h["vertex_local_index"]
-        count = h["strand_vertex_count"][h["vertex_strand"]]
-        prev = np.zeros(n)
-        prev[1:] = le[:-1]
-        wprev = np.full(n, 0.5)
-        wnext = np.full(n, 0.5)
-        if rescaling:
-            wprev[local == 1] = 1.0
-            wnext[local == count - 2] = 1.0
-        return np.where(h["pair_is_active"].astype(bool), wprev * prev + wnext * le, 1.0)
+
+def pair_voronoi_length(host: dict, rescaling: bool, edge_rest_length=None) -> np.ndarray:
+    """Bending Voronoi length of every pair [m], float64, shape (vertex_count,), 1 where inactive.
+
+    Pair i (vertices i-1, i, i+1) owns half of each of its two edges; with ``rescaling`` (Daviet 2023
+    Sec. 5.1, ``voronoi_rescaling`` of the solver configs) the second and penultimate vertices of a strand
+    own the whole boundary edge instead of half of it.  ``edge_rest_length``: other rest lengths than the
+    host's (the sag-free rest pose's, before they are applied).
+    """
+    h = host
+    le = np.asarray(h["edge_rest_length"] if edge_rest_length is None else edge_rest_length, np.float64)
+    n = le.shape[0]
+    local = h["vertex_local_index"]
+    count = h["strand_vertex_count"][h["vertex_strand"]]
+    prev = np.zeros(n)
+    prev[1:] = le[:-1]
+    wprev = np.full(n, 0.5)
+    wnext = np.full(n, 0.5)
+    if rescaling:
+        wprev[local == 1] = 1.0
+        wnext[local == count - 2] = 1.0
+    return np.where(h["pair_is_active"].astype(bool), wprev * prev + wnext * le, 1.0)
 
 
 def _np_float():

@@ -145,6 +145,8 @@ def shape_drift(positions, host: dict, body_rotation=None, body_translation=None
     """p90 and max of |x - (R_b x* + T_b)| over the free vertices of clamped strands [m] (see the module
     docstring); x* = ``host["vertex_rest_position"]``, the authored shape in the body frame.  Identity
     transforms when ``body_rotation`` is None."""
+    if not all(k in host for k in ("strand_body", "vertex_rest_position", "vertex_is_fixed")):
+        return {}  # a host without an authored shape (hand-made frames): no drift to measure
     x = np.asarray(positions, np.float64)
     strand = np.asarray(host["vertex_strand"])
     body = np.asarray(host["strand_body"])[strand]

@@ -210,6 +210,8 @@ def session_config(groom, args):
             over["iterations"] = args.iterations
         if args.contacts is not None:
             over["contacts"] = args.contacts == "on"
+        if getattr(args, "rest_pose", None) is not None:
+            over["rest_pose"] = args.rest_pose
         return replace(cfg, **over)
     except (TypeError, ValueError) as exc:
         raise CLIError(str(exc)) from None
@@ -334,6 +336,9 @@ def _add_session_options(p) -> None:
     p.add_argument("--contacts", choices=["on", "off"], default=None,
                    help="hair-hair and head proximity contacts (default on; compiling the contact kernels "
                         "takes 20-180 s on a 2-core CPU)")
+    p.add_argument("--rest-pose", choices=["authored", "sag-free"], default=None,
+                   help="rest pose of the guides: 'authored' (default; they sag under gravity) or 'sag-free' "
+                        "(the rest shape is solved to be an equilibrium, re-solved after every edit)")
     p.add_argument("--arch", default="cpu", help="Taichi arch: cpu (default), cuda, gpu, vulkan")
 
 

@@ -124,7 +124,7 @@ def cmd_rest_pose(args) -> int:
     if not args.no_check:
         from ..solvers.rest_pose import check_stability
 
-        check_stability(model, res, SolverADMMConfig(), gravity=tuple(args.gravity))
+        check_stability(model, res, SolverADMMConfig(), gravity=tuple(args.gravity), progress=True)
     xr, tw = rest_curve(model, res.pair_rest_strain, res.edge_rest_length)
     rest = g.points.astype(np.float64).copy()
     twist = np.zeros(g.vertex_count)

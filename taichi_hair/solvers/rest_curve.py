@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rest_pose import _dot, _pair_voronoi_length, pair_strain_jacobians, rest_frames
+from ..model import pair_voronoi_length
+from .rest_pose import _dot, pair_strain_jacobians, rest_frames
 
 
 def _quaternion_matrix(w: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -117,7 +118,7 @@ def moments_from_rest_curve(model, rest_points: np.ndarray, rest_twist: np.ndarr
     k_auth = np.zeros((n, 3))
     k_auth[ip] = pair_strain_jacobians(scfg.strain_measure, m1[a], m2[a], ta[a], nla[a], m1[ip], m2[ip], ta[ip],
                                        nla[ip], twist=tha[ip] - tha[a])[0]
-    vstar = _pair_voronoi_length(h, np.asarray(h["edge_rest_length"], np.float64), scfg.voronoi_rescaling)
+    vstar = pair_voronoi_length(h, scfg.voronoi_rescaling)
     S = np.where(active[:, None], np.asarray(h["pair_bending_modulus"], np.float64) / vstar[:, None], 0.0)
     mu = S * (k_auth - k_rest)
     clamped = (h["strand_body"] >= 0)[h["vertex_strand"]]
@@ -147,7 +148,7 @@ def rest_pose_from_curve(model, rest_points: np.ndarray, rest_twist: np.ndarray 
     residual = equilibrium_residual(_View, scfg, gravity)
     strand_of = h["vertex_strand"]
     active = h["pair_is_active"].astype(bool)
-    vstar = _pair_voronoi_length(h, np.asarray(h["edge_rest_length"], np.float64), scfg.voronoi_rescaling)
+    vstar = pair_voronoi_length(h, scfg.voronoi_rescaling)
     S = np.where(active[:, None], np.asarray(h["pair_bending_modulus"], np.float64) / vstar[:, None], 0.0)
     from .rest_pose import _pair_jacobians
 

@@ -59,6 +59,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..model import pair_voronoi_length
+
 #: Host keys the rest pose adds to ``Model.host``.
 MOMENT_KEY = "pair_rest_moment"
 MEASURE_KEY = "rest_pose_measure"
@@ -348,7 +350,7 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
         fe = np.nonzero(free_edge)[0]
         rest_len[fe] = _rest_length_for_tension(measure, nlen[fe], tension[fe], ea[fe])
     # The solver's bending stiffness S_i = E_b K / v_i* with these rest lengths (model.pair_voronoi_length).
-    vstar = _pair_voronoi_length(h, rest_len, scfg.voronoi_rescaling)
+    vstar = pair_voronoi_length(h, scfg.voronoi_rescaling, rest_len)
     S = np.where(active[:, None], np.asarray(h["pair_bending_modulus"], np.float64) / vstar[:, None], 0.0)
 
     kappa, Ja, Jb, dka, dkb = _pair_jacobians(h, measure)
@@ -414,21 +416,6 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
                           seconds=time.perf_counter() - t_start)
 
 
-def _pair_voronoi_length(h: dict, le: np.ndarray, rescaling: bool) -> np.ndarray:
-    """:meth:`Model.pair_voronoi_length` for given rest lengths ``le``."""
-    n = le.shape[0]
-    local = h["vertex_local_index"]
-    count = h["strand_vertex_count"][h["vertex_strand"]]
-    prev = np.zeros(n)
-    prev[1:] = le[:-1]
-    wprev = np.full(n, 0.5)
-    wnext = np.full(n, 0.5)
-    if rescaling:
-        wprev[local == 1] = 1.0
-        wnext[local == count - 2] = 1.0
-    return np.where(h["pair_is_active"].astype(bool), wprev * prev + wnext * le, 1.0)
-
-
 def _statics_residual(h, G, mu, Ja, Jb, dka, dkb, t, active, ghost, local):
     """|G_j - tension_j t_j - J_{b,j}^T mu_j - J_{a,j+1}^T mu_{j+1}| + |twist balance| / |e| per edge [N]."""
     n = G.shape[0]
@@ -472,7 +459,7 @@ def clear_rest_pose(model) -> None:
 
 def check_stability(model, result: RestPoseResult, solver_config=None, gravity=(0.0, -9.81, 0.0),
                     seconds: float = 1.0, dt: float = 1.0 / 96.0, tolerance: float = 1.0e-3,
-                    perturbation: float = 1.0e-6, seed: int = 0) -> RestPoseResult:
+                    perturbation: float = 1.0e-6, seed: int = 0, progress: bool = False) -> RestPoseResult:
     """Which held strands are *unstable* equilibria, by the simulated model itself: a dynamic run of the Model
     (its rest pose applied, :func:`apply_rest_pose`) without contacts, from x* with every free vertex moved by
     up to ``perturbation`` [m] (seeded) and the duals primed; a held strand any of whose vertices drifts more
@@ -484,7 +471,7 @@ def check_stability(model, result: RestPoseResult, solver_config=None, gravity=(
     fell within 1 s alone, all rising 1-2 cm from the crown before hanging down (an arch carrying its hanging
     part topples sideways); Greenhill's self-weight buckling index of their compressed runs (0.05-0.23)
     overlapped the stable strands' (up to 0.23), so no threshold on it separates them.  Only support (hair on
-    hair, the scalp) holds such strands."""
+    hair, the scalp) holds such strands.  ``progress``: a progress bar on stderr (the command line's)."""
     from dataclasses import replace
 
     from ..config import Mode, SolverADMMConfig
@@ -503,10 +490,16 @@ def check_stability(model, result: RestPoseResult, solver_config=None, gravity=(
     solver.prime_duals(state, control, dt)
     strand = h["vertex_strand"]
     drift = np.zeros(model.strand_count)
-    for _ in range(max(1, int(round(seconds / dt)))):
+    steps = max(1, int(round(seconds / dt)))
+    from ..progress import Progress
+
+    bar = Progress(total=steps, label="stability steps", enabled=progress)
+    for k in range(steps):
         solver.step(state, control, dt)
         d = np.linalg.norm(state.vertex_position.to_numpy().astype(np.float64) - x0, axis=1)
         np.maximum.at(drift, strand, d)
+        bar.update(k + 1)
+    bar.close()
     unheld = {s for s, _ in result.unheld}
     result.strand_stability_drift = drift
     result.unstable = [(int(s), f"it drifts {1e3 * drift[s]:.1f} mm within {seconds:g} s without contacts "
