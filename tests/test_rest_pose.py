@@ -343,3 +343,27 @@ def test_stability_check_finds_an_upright_strand_above_its_self_weight_buckling_
     assert [s for s, _ in res.unstable] == [0], (res.unstable, res.strand_stability_drift)
     assert res.strand_stability_drift[1] < 1e-4 and res.strand_stability_drift[2] < 1e-4
     assert "unstable" in res.summary()
+
+
+def test_rest_pose_command_names_roots_off_the_body_and_strands_inside_it(tmp_path):
+    """taichi-hair rest-pose --body MESH: a strand rooted 3 cm off the sphere and one that starts inside it are
+    named on stderr (one line each), exit 0, and the strand on the body is solved all the same."""
+    import trimesh
+
+    from taichi_hair.io import save_groom
+    from taichi_hair.io.groom import Groom
+
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    body = tmp_path / "ball.obj"
+    mesh.export(str(body))
+    on = np.c_[np.zeros(9), 0.05 + np.linspace(0, 0.02, 9), np.zeros(9)]        # root on top, growing up
+    off = on + [0.0, 0.03, 0.0]                                                # root 3 cm above the surface
+    inside = np.c_[np.zeros(9), np.linspace(0.05, 0.03, 9), np.full(9, 0.001)]  # grows into the ball
+    src = tmp_path / "g.thair.npz"
+    save_groom(Groom.from_polylines([on, off, inside], units="m"), str(src))
+    p = _cli("rest-pose", str(src), "--units", "m", "--body", str(body), "--no-check", "--out",
+             str(tmp_path / "o.thair.npz"))
+    assert p.returncode == 0, p.stderr
+    assert "from the body: 1 of 3 strands (farthest: strand 1, " in p.stderr, p.stderr
+    assert "inside the body at the start: 1 strands (first: strand 2;" in p.stderr, p.stderr
+    assert "3/3 strands sag-free" in p.stdout, p.stdout

@@ -73,8 +73,9 @@ def _body_report(groom, mesh_path: str) -> list:
     far = np.nonzero(d > ROOT_TOLERANCE_M)[0]
     if far.size:
         s = int(far[np.argmax(d[far])])
-        lines.append(f"{far.size} strands have their root more than {1e3 * ROOT_TOLERANCE_M:g} mm from the body "
-                     f"(strand {s}: {1e3 * d[s]:.1f} mm); their rest pose is solved as if clamped where they are")
+        lines.append(f"roots more than {1e3 * ROOT_TOLERANCE_M:g} mm from the body: {far.size} of "
+                     f"{len(roots)} strands (farthest: strand {s}, {1e3 * d[s]:.1f} mm); their rest pose is solved "
+                     "as if clamped where they are")
     free = np.ones(groom.vertex_count, bool)
     free[off[:-1]] = False
     free[np.minimum(off[:-1] + 1, off[1:] - 1)] = False
@@ -83,7 +84,7 @@ def _body_report(groom, mesh_path: str) -> list:
     if inside.size:
         strand = np.searchsorted(off, inside, side="right") - 1
         bad = np.unique(strand)
-        lines.append(f"{bad.size} strands start with vertices inside the body (strand {int(bad[0])}, "
+        lines.append(f"vertices inside the body at the start: {bad.size} strands (first: strand {int(bad[0])}; "
                      f"{inside.size} vertices in all); contacts will push them out, away from the authored shape")
     return lines
 
