@@ -76,6 +76,10 @@ from .state import Control, State
 from .strains import BERGOU, KORNER
 from .tridiag import TridiagonalSolver
 
+#: The ADMM weight of a prestressed pair (a sag-free rest pose) is at least this times the pair's prestress
+#: ratio |mu| / S times its w0 = 1 weight (``SolverADMM._set_coefficients``) [-].
+PRESTRESS_WEIGHT = 400.0
+
 #: Profiled stages.  The stage schedule fills local/global/frames/twist; the strand
 #: schedule records its fused ADMM loop under "iterations" (and the frame update
 #: before the loop under "frames").
@@ -200,6 +204,15 @@ class SolverADMM(SolverBase):
             mu = np.asarray(moment, np.float64)
             safe = np.where(bend > 0.0, bend, 1.0)
             self.buf.pair_rest_kappa.from_numpy(np.where(bend > 0.0, rk - mu / safe, rk).astype(f))
+            # Prestress: the local step's Gauss-Newton Hessian J^T K J leaves out mu . d2kappa/de2, of relative
+            # size rho = |mu| / S = |kappa(x*) - kappa_bar| (zero for an authored rest pose at rest).  With
+            # W_y at w0 = 1 the iteration then diverged from the sag-free equilibrium of the hang scene's curly
+            # strands (20 strands, quasistatic, 200 steps: 17 cm; at w0 = 5: 0.2 mm; at 25: 1 um; rho up to
+            # ~0.9): the weight of a prestressed pair is raised to PRESTRESS_WEIGHT * rho times its w0 = 1
+            # weight.  Measured over 600 steps (largest drift from x*): 25 -> 24 um at 200 steps, 100 -> 22 um
+            # (still growing), 400 -> 2.8 um (w0 = 25 everywhere: 2.1 um).
+            rho = np.where(active, np.linalg.norm(mu[:, :2] / safe[:, :2], axis=1), 0.0)
+            weight = np.maximum(weight, PRESTRESS_WEIGHT * rho * weight / cfg.w0)
         self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
         self.buf.pair_admm_weight.from_numpy(weight.astype(f))
         self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
