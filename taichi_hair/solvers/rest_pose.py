@@ -467,11 +467,11 @@ def check_stability(model, result: RestPoseResult, solver_config=None, gravity=(
 
     Why a run and not a formula: the moments are fixed by the statics, so the Hessian at x* and with it the
     stability do not depend on the rest shape chosen: no rest pose holds a strand whose equilibrium is
-    unstable.  Measured on 251 held strands of the generated straight groom (18 cm on assets/head.obj): 14
-    fell within 1 s alone, all rising 1-2 cm from the crown before hanging down (an arch carrying its hanging
-    part topples sideways); Greenhill's self-weight buckling index of their compressed runs (0.05-0.23)
-    overlapped the stable strands' (up to 0.23), so no threshold on it separates them.  Only support (hair on
-    hair, the scalp) holds such strands.  ``progress``: a progress bar on stderr (the command line's)."""
+    unstable (a straight upright strand above its self-weight buckling length, tested), and only support
+    (hair on hair, the scalp) holds such strands.  The run also catches the solver's own trouble: before the
+    prestress weight of ``SolverADMM`` (``PRESTRESS_WEIGHT``) it flagged 203 of the hang scene's 300 sag-free
+    strands, which were the ADMM iteration diverging at w0 = 1, not physics; with it, none.
+    ``progress``: a progress bar on stderr (the command line's)."""
     from dataclasses import replace
 
     from ..config import Mode, SolverADMMConfig
