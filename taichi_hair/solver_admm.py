@@ -210,9 +210,9 @@ class SolverADMM(SolverBase):
             # strands (20 strands, quasistatic, 200 steps: 17 cm; at w0 = 5: 0.2 mm; at 25: 1 um; rho up to
             # ~0.9): the weight of a prestressed pair is raised to PRESTRESS_WEIGHT * rho times its w0 = 1
             # weight.  Measured over 600 steps (largest drift from x*): 25 -> 24 um at 200 steps, 100 -> 22 um
-            # (still growing), 400 -> 2.8 um (w0 = 25 everywhere: 2.1 um).  The price: under a head turn the
-            # strands come back slowly (BENCHMARKS, sag-free rest pose); the prestress term in the local step's
-            # Hessian (Newton instead of Gauss-Newton) would be the right fix.
+            # (still growing), 400 -> 2.8 um (w0 = 25 everywhere: 2.1 um).  Under a head turn sag-free strands
+            # do not come back (BENCHMARKS, sag-free rest pose; at 100 as at 400); the prestress term in the
+            # local step's Hessian (Newton instead of Gauss-Newton) is the next thing to try, not a larger weight.
             rho = np.where(active, np.linalg.norm(mu[:, :2] / safe[:, :2], axis=1), 0.0)
             weight = np.maximum(weight, PRESTRESS_WEIGHT * rho * weight / cfg.w0)
         self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
