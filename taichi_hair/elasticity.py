@@ -62,6 +62,21 @@ def dual_frame(frame: ti.template(), strand: ti.template(), body_rotation: ti.te
 
 
 @ti.func
+def pair_strain_at(i: ti.i32, measure: ti.template(), x: ti.template(), theta: ti.template(), es: ti.template()):
+    """Edge vectors (e_{i-1}, e_i), strain kappa_i and its edge Jacobian d kappa / d (e_{i-1}, e_i) of the
+    active pair i at the current positions and frames (the local step's and ``prime_duals``' one evaluation)."""
+    a = i - 1
+    ea = x[i] - x[a]
+    eb = x[i + 1] - x[i]
+    m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
+    m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
+    twist = theta[i] - theta[a] + es.edge_reference_twist[i]
+    kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
+    J = pair_edge_jacobian(measure, m1a, m2a, ta, ea.norm(), m1b, m2b, tb, eb.norm())
+    return ea, eb, kappa, J
+
+
+@ti.func
 def local_elasticity_at(
     i: ti.i32,
     measure: ti.template(),
@@ -85,13 +100,7 @@ def local_elasticity_at(
     """
     if pair.pair_is_active[i] != 0:
         a = i - 1
-        ea = x[i] - x[a]
-        eb = x[i + 1] - x[i]
-        m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
-        m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
-        twist = theta[i] - theta[a] + es.edge_reference_twist[i]
-        kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
-        J = pair_edge_jacobian(measure, m1a, m2a, ta, ea.norm(), m1b, m2b, tb, eb.norm())
+        ea, eb, kappa, J = pair_strain_at(i, measure, x, theta, es)
         s = vertex.vertex_strand[i]
         c = strand.strand_damping_time[s] * damping_scale
         k = buf.pair_bend_stiffness[i]
@@ -202,14 +211,7 @@ def prime_duals(
     step 1 with it; without it the sag-free test strand moves 0.34 um in 2 s, against 117 um unprimed)."""
     for i in x:
         if pair.pair_is_active[i] != 0:
-            a = i - 1
-            ea = x[i] - x[a]
-            eb = x[i + 1] - x[i]
-            m1a, m2a, ta = es.edge_material_d1[a], es.edge_material_d2[a], es.edge_tangent[a]
-            m1b, m2b, tb = es.edge_material_d1[i], es.edge_material_d2[i], es.edge_tangent[i]
-            twist = theta[i] - theta[a] + es.edge_reference_twist[i]
-            kappa = pair_kappa(measure, m1a, m2a, ta, m1b, m2b, tb, twist)
-            J = pair_edge_jacobian(measure, m1a, m2a, ta, ea.norm(), m1b, m2b, tb, eb.norm())
+            _, _, kappa, J = pair_strain_at(i, measure, x, theta, es)
             g = J.transpose() @ (buf.pair_bend_stiffness[i] * (kappa - buf.pair_rest_kappa[i]))
             w = pair_weight(vertex, buf, i, weight_floor)
             s = vertex.vertex_strand[i]

@@ -116,6 +116,7 @@ class Scene:
             (checkpoints compare it before resuming).
         model_builder: optional callable returning the Model (the built-in scenes use their own builders).
         rest_pose: "authored", "sag-free" or "file" ([groom] rest_pose; :mod:`taichi_hair.solvers.rest_pose`).
+        rest_pose_check: also run ``check_stability`` after a sag-free solve ([groom] rest_pose_check).
         rest_pose_result: the :class:`~taichi_hair.solvers.rest_pose.RestPoseResult` of the last
             :meth:`build_model` of a sag-free scene (None otherwise).
     """
@@ -138,6 +139,7 @@ class Scene:
     description: dict = field(default_factory=dict)
     model_builder: object = None
     rest_pose: str = "authored"
+    rest_pose_check: bool = False
     rest_pose_result: object = None
 
     @property
@@ -198,7 +200,7 @@ class Scene:
 
         result = solve_rest_pose(model, self.solver_config, gravity=self._gravity_in_body())
         apply_rest_pose(model, result)
-        if self.description.get("groom", {}).get("rest_pose_check"):
+        if self.rest_pose_check:
             from ..solvers.rest_pose import check_stability
 
             check_stability(model, result, self.solver_config, gravity=self._gravity_in_body())
@@ -297,7 +299,7 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     scene = Scene(name=name, path=path, frames=frames, fps=fps, substeps=substeps, gravity=gravity, groom=groom,
                   root=root, root_body=body, material=material, solver=kind, solver_config=cfg, colliders=colliders,
                   bodies=bodies, output=resolve_path(base, output) if output else "", description=desc,
-                  rest_pose=gdesc.get("rest_pose", "authored"))
+                  rest_pose=gdesc.get("rest_pose", "authored"), rest_pose_check=bool(gdesc.get("rest_pose_check")))
     if scene.rest_pose == "sag-free" and kind != "admm":
         raise SceneError(f"{path}: [groom] rest_pose: 'sag-free' is solved for the ADMM model; the scene's "
                          f"[solver] type is {kind!r}")

@@ -134,24 +134,17 @@ def rest_pose_from_curve(model, rest_points: np.ndarray, rest_twist: np.ndarray 
     import time
 
     from ..config import SolverADMMConfig
-    from .rest_pose import MOMENT_KEY, MEASURE_KEY, RestPoseResult, equilibrium_residual
+    from .rest_pose import RestPoseResult, _pair_jacobians, equilibrium_residual
 
     t0 = time.perf_counter()
     scfg = solver_config or SolverADMMConfig()
     h = model.host
     mu = moments_from_rest_curve(model, rest_points, rest_twist, scfg)
-    trial = dict(h)
-    trial[MOMENT_KEY], trial[MEASURE_KEY] = mu, scfg.strain_measure
-
-    class _View:  # equilibrium_residual reads host, vertex_count and strand_count only
-        host, vertex_count, strand_count = trial, model.vertex_count, model.strand_count
-    residual = equilibrium_residual(_View, scfg, gravity)
+    residual = equilibrium_residual(model, scfg, gravity, moments=mu)
     strand_of = h["vertex_strand"]
     active = h["pair_is_active"].astype(bool)
     vstar = pair_voronoi_length(h, scfg.voronoi_rescaling)
     S = np.where(active[:, None], np.asarray(h["pair_bending_modulus"], np.float64) / vstar[:, None], 0.0)
-    from .rest_pose import _pair_jacobians
-
     kappa = _pair_jacobians(h, scfg.strain_measure)[0]
     kbar = kappa - np.where(S > 0, mu / np.where(S > 0, S, 1.0), 0.0)
     turn = np.zeros(model.strand_count)

@@ -259,11 +259,12 @@ def _pair_jacobians(h: dict, measure: str):
     return kappa, Ja, Jb, dka, dkb
 
 
-def equilibrium_residual(model, solver_config=None, gravity=(0.0, -9.81, 0.0)) -> np.ndarray:
+def equilibrium_residual(model, solver_config=None, gravity=(0.0, -9.81, 0.0), moments=None) -> np.ndarray:
     """How far the authored shape is from an equilibrium of the Model as it is (its rest moments, zero for an
     authored rest pose): per strand, the largest unbalanced force of a vertex (bending and twist; the tension
     is carried by the stretch) over the strand's weight [-], NaN for free strands.  About 1 for an authored
-    rest pose under gravity (nothing holds the weight), round-off for a solved sag-free one."""
+    rest pose under gravity (nothing holds the weight), round-off for a solved sag-free one.  ``moments``: other
+    rest moments than the Model's (n, 3) [J] (a rest curve read from a file, before it is applied)."""
     from ..config import SolverADMMConfig
 
     scfg = solver_config or SolverADMMConfig()
@@ -273,7 +274,7 @@ def equilibrium_residual(model, solver_config=None, gravity=(0.0, -9.81, 0.0)) -
     G = _edge_loads(h, force)
     kappa, Ja, Jb, dka, dkb = _pair_jacobians(h, scfg.strain_measure)
     t = np.asarray(h["edge_rest_tangent"], np.float64)
-    mu = h.get(MOMENT_KEY)
+    mu = h.get(MOMENT_KEY) if moments is None else moments
     mu = np.zeros((model.vertex_count, 3)) if mu is None else np.asarray(mu, np.float64)
     local = h["vertex_local_index"]
     strand_of = h["vertex_strand"]
@@ -381,7 +382,7 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
     resid = _statics_residual(h, G, mu, Ja, Jb, dka, dkb, t, active, ghost, local)
     weight = np.maximum(np.bincount(strand_of, weights=np.linalg.norm(force, axis=1), minlength=ns), 1e-300)
     strand_res = np.full(ns, np.nan)
-    r = np.bincount(strand_of, weights=None, minlength=ns) * 0.0
+    r = np.zeros(ns)
     np.maximum.at(r, strand_of, resid)
     strand_res[solve_s] = r[solve_s] / weight[solve_s]
     turn = np.zeros(ns)
