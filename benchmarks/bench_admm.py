@@ -41,10 +41,13 @@ def curly_groom(ti_hair, strands, vertices, seed=0):
     return b.finalize()
 
 
-def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="auto"):
+def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="auto", anderson=None):
     model = curly_groom(th, strands, vertices)
     res = {"strands": strands, "vertices_per_strand": vertices, "vertices": model.vertex_count}
     cfg = dict(iterations=iterations)
+    if anderson is not None:
+        cfg["anderson_window"] = anderson
+    res["anderson_window"] = th.SolverADMMConfig(**cfg).anderson_window
     if schedule != "auto":
         cfg["schedule"] = schedule
     for profile in (False, True):
@@ -67,7 +70,7 @@ def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="aut
     return res
 
 
-def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto"):
+def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto", anderson=None):
     """Quasistatic ADMM: iterations and wall time until the tip height stays within rel_tol of its final value."""
     n, L = 41, 0.1
 
@@ -76,6 +79,8 @@ def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto"):
         b.add_strand(np.c_[np.linspace(0, L, n), np.zeros(n), np.zeros(n)], th.RodMaterial())
         model = b.finalize()
         cfg = dict(iterations=chunk, mode="quasistatic", w0=w0)
+        if anderson is not None:
+            cfg["anderson_window"] = anderson
         if schedule != "auto":
             cfg["schedule"] = schedule
         return model, th.SolverADMM(model, th.SolverADMMConfig(**cfg))
@@ -110,7 +115,7 @@ def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto"):
     tip = float(st.positions()[-1, 1])
     return {"iterations": chunks * chunk, "wall_s": float(np.median(timings)), "compile_s": compile_s,
             "final_tip_drop_m": -float(final), "tip_drop_m_after_timed_run": -tip, "w0": w0,
-            "iterations_per_call": chunk}
+            "iterations_per_call": chunk, "anderson_window": solver.config.anderson_window}
 
 
 def main(argv=None):
@@ -119,6 +124,8 @@ def main(argv=None):
     p.add_argument("--sizes", default="1000x32,10000x32,1000x128")
     p.add_argument("--schedule", default="auto")
     p.add_argument("--no-mujoco", action="store_true")
+    p.add_argument("--anderson", default=None,
+                   help="comma-separated Anderson windows to compare in one run (default: the solver's default)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     bench = Bench("admm", argv)
@@ -130,19 +137,24 @@ def main(argv=None):
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
     out = {"date": time.strftime("%Y-%m-%d"), "arch": arch, "throughput": []}
     print(f"SolverADMM benchmark on {arch} ({os.cpu_count()} cores), taichi {ti.__version__}")
-    print(f"{'strands x verts':>16} {'ms/iter':>9} {'Mvert-it/s':>11} {'compile s':>10}  stage ms/iter")
+    windows = [None] if args.anderson is None else [int(w) for w in args.anderson.split(",")]
+    print(f"{'strands x verts':>16} {'anderson':>8} {'ms/iter':>9} {'Mvert-it/s':>11} {'compile s':>10}  stage ms/iter")
     for size in args.sizes.split(","):
         ns, nv = (int(v) for v in size.split("x"))
-        r = throughput(th, ti, ns, nv, schedule=args.schedule)
-        out["throughput"].append(r)
-        stages = " ".join(f"{k}={v:.2f}" for k, v in r["stage_ms_per_iteration"].items())
-        print(f"{size:>16} {r['ms_per_iteration']:9.3f} {r['mvertex_iterations_per_s']:11.2f} "
-              f"{r['compile_and_first_step_s']:10.2f}  {stages}", flush=True)
-    rest = rod_to_rest(th, ti, schedule=args.schedule)
+        for w in windows:
+            r = throughput(th, ti, ns, nv, schedule=args.schedule, anderson=w)
+            out["throughput"].append(r)
+            stages = " ".join(f"{k}={v:.2f}" for k, v in r["stage_ms_per_iteration"].items())
+            print(f"{size:>16} {r['anderson_window']:8d} {r['ms_per_iteration']:9.3f} {r['mvertex_iterations_per_s']:11.2f} "
+                  f"{r['compile_and_first_step_s']:10.2f}  {stages}", flush=True)
+    out["rod_to_rest_by_window"] = []
+    for w in windows:
+        rest = rod_to_rest(th, ti, schedule=args.schedule, anderson=w)
+        out["rod_to_rest_by_window"].append(rest)
+        print(f"10 cm rod, 40 edges, to rest within 0.1% (quasistatic ADMM, w0={rest['w0']}, Anderson window "
+              f"{rest['anderson_window']}): {rest['iterations']} iterations, {1e3 * rest['wall_s']:.2f} ms wall "
+              f"(compile {rest['compile_s']:.2f} s), tip drop {1e3 * rest['final_tip_drop_m']:.3f} mm", flush=True)
     out["rod_to_rest"] = rest
-    print(f"10 cm rod, 40 edges, to rest within 0.1% (quasistatic ADMM, w0={rest['w0']}): "
-          f"{rest['iterations']} iterations, {1e3 * rest['wall_s']:.2f} ms wall (compile {rest['compile_s']:.2f} s), "
-          f"tip drop {1e3 * rest['final_tip_drop_m']:.3f} mm")
     if not args.no_mujoco:
         try:
             import mujoco_cable  # benchmarks/mujoco_cable.py (the script's folder is on sys.path)

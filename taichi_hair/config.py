@@ -352,21 +352,26 @@ class SolverADMMConfig:
         w0: scale of the elasticity constraint weights
             W_y = w0 E_b A R^2 / (4 v^3) (Sec. 4.4) [-].  Default 1; the
             paper's value is 25 (``w0=25.0``).  Chosen by measurement
-            (BENCHMARKS.md, "Weights"): the stability atlas (dt 1/24-1/384 s x
-            2-50 iterations x 4 rods) has 18 of 36 cells stable and accurate at
-            w0 = 1 against 5 at w0 = 25; rods clamped horizontally with drag
-            8/s end 2 s within 0.1-6.5 % of L of their equilibrium at w0 = 1,
-            5-48 % at w0 = 25 (``benchmarks/probes/weight_scale.py``); the hang
-            scene with the same drag within 2e-4 L at w0 = 1, 8e-2 L at 25
-            (``benchmarks/probes/hang_settle.py``).  Too large a W_y makes each
-            iteration move x only a little towards its minimum (W_y is ~1e5
-            times the inertia m/dt^2 on 2.5 mm edges at w0 = 25), so 10
-            iterations stop far from the backward-Euler step.  The cost: with 2
-            iterations at dt = 1/384 s the long and uneven-edge rods gain energy
-            (w0 = 25 never does); weights scaled by the inertia instead diverge
-            (measured).  With contacts the end-of-step correction holds the edge
-            lengths (``ContactConfig.correction_lengths``), which the lower W_y
-            would otherwise let stretch.
+            (BENCHMARKS.md, issue 12, "Weights" and "Anderson acceleration"):
+            with the default Anderson acceleration the stability atlas (dt
+            1/24-1/384 s x 2-50 iterations x 4 rods) has 23 of 36 cells stable
+            and accurate at w0 = 1 (w0 = 2: 20 of the 24 cells with 10-50
+            iterations, w0 = 5: 16 of 24); plain, 18 at w0 = 1 and 5 at w0 = 25.
+            Rods clamped horizontally with drag 8/s end 2 s within
+            0.015-0.19 % of L of their equilibrium (plain: 0.08-6.6 %; w0 = 25:
+            5-48 %; ``benchmarks/probes/admm_convergence.py settle``,
+            ``weight_scale.py``); the hang scene with the same drag within
+            1.8e-4 L (``benchmarks/probes/hang_settle.py``).  Too large a W_y
+            makes each iteration move x only a little towards its minimum (W_y
+            is ~1e5 times the inertia m/dt^2 on 2.5 mm edges at w0 = 25), so 10
+            iterations stop far from the backward-Euler step (w0 = 25 never
+            does).  No weight rule alone converges in 10 iterations (module
+            docstring of :mod:`taichi_hair.anderson`).  The cost: with 2
+            iterations at dt = 1/384 s the long and uneven-edge rods gain energy;
+            weights scaled by the inertia instead diverge (measured).  With
+            contacts the end-of-step correction holds the edge lengths
+            (``ContactConfig.correction_lengths``), which the lower W_y would
+            otherwise let stretch.
         inertia_floor: in the dynamic mode W_y,i is at least this times the
             inertia m_i / dt^2 (m_i / h^2 with BDF2); 0 keeps the w0 weight
             alone, as the paper [-].  Where dt resolves the bending motion the
@@ -414,6 +419,12 @@ class SolverADMMConfig:
             exact value (``frames.twist_choice``; the solver's
             ``model_choices`` says which it did and why); ``"solve"`` always
             solves them, as the paper does.
+        anderson_window: Anderson acceleration of the iterations (:mod:`taichi_hair.anderson`): the
+            number of past iterates each strand extrapolates from [-]; 0 is the paper's plain
+            iteration.  Default 0 (opt-in): with 5 iterations per step, or BDF2 at 10, it made the
+            Pareto cantilever's 2-4 cm rods with 1.25 mm edges unstable (BENCHMARKS.md).  Window 5 on the atlas (cells with 10-50
+            iterations stable and accurate: window 3: 20 of 24, 5: 21, 8: 22; plain: 16) at ~10 % per
+            iteration.  Not applied with contacts (``contacts`` or colliders): not measured there.
     """
 
     iterations: int = 10
@@ -431,6 +442,7 @@ class SolverADMMConfig:
     contacts: ContactConfig | None = None
     twist: Twist = Twist.AUTO
     integrator: Integrator = Integrator.BACKWARD_EULER
+    anderson_window: int = 0
 
     def __post_init__(self):
         owner = "SolverADMMConfig"
@@ -453,6 +465,10 @@ class SolverADMMConfig:
             )
         self.dual_frame = as_choice(DualFrame, owner, "dual_frame", self.dual_frame)
         _check_positive("SolverADMMConfig", "w0", self.w0)
+        if not (isinstance(self.anderson_window, int) and not isinstance(self.anderson_window, bool)
+                and 0 <= self.anderson_window <= 16):
+            raise ValueError(f"SolverADMMConfig.anderson_window must be an integer in 0..16, "
+                             f"got {self.anderson_window!r}")
         if not (isinstance(self.inertia_floor, (int, float)) and math.isfinite(self.inertia_floor)
                 and self.inertia_floor >= 0):
             raise ValueError(f"SolverADMMConfig.inertia_floor must be a finite number >= 0, got {self.inertia_floor!r}")

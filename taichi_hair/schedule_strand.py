@@ -18,6 +18,7 @@ for its strand, *all* iterations serially:
         position assembly     (assemble_position_at,    every vertex)
         Thomas solve          (thomas_strand,           3 right-hand sides)
         x += dx               (apply_position_update_at)
+        Anderson mixing       (anderson_mix_strand,     when anderson_window > 0)
         reference frames      (reference_frame_at,      every edge)
         reference twists      (reference_twist_at,      every pair; Bergou only)
         pair twist terms      (pair_twist_terms_at,     every pair)
@@ -51,6 +52,7 @@ from .admm import (
     assemble_twist_at,
     pair_twist_terms_at,
 )
+from .anderson import anderson_begin_strand, anderson_mix_strand
 from .elasticity import local_elasticity_at
 from .frames import material_frame_at, reference_frame_at, reference_twist_at, twist_free_strand
 from .tridiag import thomas_strand
@@ -78,6 +80,8 @@ def admm_iterations_strand(
     damping_scale: float,
     iterations: ti.i32,
     weight_floor: float,
+    aa: ti.template(),
+    window: ti.template(),
 ):
     """``iterations`` ADMM iterations (Algorithm 1, lines 4a-4g) for every strand, strands in parallel.
 
@@ -89,6 +93,8 @@ def admm_iterations_strand(
     for s in model.strand_vertex_start:
         start = model.strand_vertex_start[s]
         m = model.strand_vertex_count[s]
+        if ti.static(window > 0):
+            anderson_begin_strand(s, start, m, x, buf, aa)
         for _it in range(iterations):
             # (a, c) Local elasticity solve and fused dual update, every pair of the strand.
             for k in range(m):
@@ -105,6 +111,9 @@ def admm_iterations_strand(
             for k in range(m):
                 i = start + k
                 apply_position_update_at(i, model.vertex, x, buf)
+            if ti.static(window > 0):
+                # Anderson mixing of (x, lambda_y) before the frames are rebuilt from x (anderson.py).
+                anderson_mix_strand(s, start, m, model.vertex, x, buf, aa, window, _it == iterations - 1)
             # (e) Frames: every edge's tangent first, then the reference twists.
             for k in range(m):
                 i = start + k

@@ -66,6 +66,7 @@ import taichi as ti
 
 from .solver_base import SolverBase
 from . import admm
+from .anderson import AndersonBuffers, anderson_begin, anderson_mix
 from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
 from .fields import SolverBuffers
@@ -154,6 +155,15 @@ class SolverADMM(SolverBase):
 
             ccfg = cfg.contacts if cfg.contacts is not None else ContactConfig(hair_hair=False)
             self.contacts = ContactPipeline(model, ccfg, self._collider_set(colliders))
+        #: Anderson acceleration of the iterations (anderson.py); not with contacts, whose projection
+        #: couples strands inside an iteration (measured only without them).
+        window = cfg.anderson_window if self.contacts is None else 0
+        self.anderson = AndersonBuffers(model.vertex_count if window else 1,
+                                        model.strand_count if window else 1, window)
+        self.model_choices["acceleration"] = (
+            f"Anderson acceleration, window {window}" if window else
+            "no acceleration (SolverADMMConfig.anderson_window = 0)" if cfg.anderson_window == 0 else
+            "no acceleration: not used with contacts")
         #: Statistics of the last step's contacts (see ``ContactPipeline.statistics``).
         self.contact_stats = {}
         self.iteration_count = 0
@@ -288,7 +298,8 @@ class SolverADMM(SolverBase):
             # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
             admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                    control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
-                                   v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations, weight_floor)
+                                   v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations, weight_floor,
+                                   self.anderson, self.anderson.window)
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
         elif self.schedule == Schedule.STRAND:
@@ -303,7 +314,8 @@ class SolverADMM(SolverBase):
                 t0 = self._tock("projection", t0)
                 admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                        control.body_rotation, state.vertex_position, state.edge_twist, state, b,
-                                       g, v_air, cfg.air_viscosity, h, damping_scale, 1, weight_floor)
+                                       g, v_air, cfg.air_viscosity, h, damping_scale, 1, weight_floor,
+                                       self.anderson, 0)
                 t0 = self._tock("iterations", t0)
                 self.iteration_count += 1
         else:
@@ -341,6 +353,9 @@ class SolverADMM(SolverBase):
         dyn = self.dynamic
         con = self.contacts
         ccd_at = self._continuous_iterations()
+        aa = self.anderson
+        if aa.window > 0:
+            anderson_begin(m.strand, state.vertex_position, b, aa)
         for it in range(cfg.iterations):
             if it in ccd_at:
                 # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
@@ -362,6 +377,9 @@ class SolverADMM(SolverBase):
                                           self._weight_floor)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
             admm.apply_position_update(m.vertex, state.vertex_position, b)
+            if aa.window > 0:
+                # Anderson mixing of (x, lambda_y), strand by strand (anderson.py).
+                anderson_mix(m.strand, m.vertex, state.vertex_position, b, aa, aa.window, int(it == cfg.iterations - 1))
             t0 = self._tock("global", t0)
             update_reference_frames(self.with_ref_twist, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
                                     state.vertex_position,

@@ -379,7 +379,8 @@ def test_prestress_weight_keeps_the_admm_iteration_at_a_curly_sag_free_equilibri
     """The hang scene's curly strands (20 cm, 2 mm curls) sag-free, quasistatic ADMM at the default w0 = 1 from
     the authored shape: within 10 um after 600 steps (measured 2.8 um).  The Gauss-Newton local step leaves out
     mu . d2kappa; without the prestress weight (PRESTRESS_WEIGHT = 0) the iteration leaves the equilibrium
-    (measured 17 cm after 200 steps on 20 strands; here > 1 mm)."""
+    (measured 17 cm after 200 steps on 20 strands with the plain iteration; here, with the default Anderson
+    acceleration, 0.55 mm after 300 steps: bound 0.1 mm)."""
     import taichi_hair.solver_admm as sa
     from taichi_hair.scene.builtin import HangScene, build_hang
 
@@ -400,6 +401,6 @@ def test_prestress_weight_keeps_the_admm_iteration_at_a_curly_sag_free_equilibri
     saved = sa.PRESTRESS_WEIGHT
     try:
         sa.PRESTRESS_WEIGHT = 0.0
-        assert drift(300) > 1e-3
+        assert drift(300) > 1e-4
     finally:
         sa.PRESTRESS_WEIGHT = saved

@@ -15,7 +15,7 @@ The output is chosen by the name given to ``--out``:
   ``summary.json``.
 
 For a file output the statistics, summary and checkpoint sit beside it: ``<name>.stats.csv``,
-``<name>.summary.json``, ``<name>.checkpoint.npz``.  Checkpoints (:mod:`taichi_hair.checkpoint`, ADMM
+``<name>.summary.json``, ``<name>.checkpoint.npz``.  Checkpoints (:mod:`taichi_hair.scene.checkpoint`, ADMM
 solver only) are written every ``--checkpoint-every`` frames and at the end; ``--resume`` continues from
 the last one and gives the same frames, bit for bit, as a run that never stopped (and refuses a
 checkpoint made for another scene or other settings).

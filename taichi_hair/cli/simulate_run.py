@@ -57,7 +57,7 @@ class SimulateRun:
                 raise CLIError(f"--resume needs the admm solver (this scene uses {scene.solver!r}, which has no "
                                "checkpoints)")
             if os.path.exists(layout["checkpoint"]):
-                from ..checkpoint import fingerprint_difference, read_checkpoint
+                from ..scene.checkpoint import fingerprint_difference, read_checkpoint
 
                 self.ckpt = read_checkpoint(layout["checkpoint"])
                 diff = fingerprint_difference(self.ckpt["fingerprint"], self.fingerprint)
@@ -166,7 +166,7 @@ class SimulateRun:
 
     # ------------------------------------------------------------------ stepping
     def _checkpoint(self, f: int) -> None:
-        from ..checkpoint import write_checkpoint
+        from ..scene.checkpoint import write_checkpoint
 
         write_checkpoint(self.layout["checkpoint"], self.state.to_numpy(), self.solver.checkpoint(), f,
                          self.frames[:f + 1], self.stats_rows, self.fingerprint)
