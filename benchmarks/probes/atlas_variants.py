@@ -28,7 +28,7 @@ def main(argv=None) -> int:
 
     knobs = tuple(int(k) for k in argv[0].split(","))
     specs = [json.loads(a) for a in argv[1:5]]
-    names = ("admm", "admm_w1", "admm_plain", "admm_bdf2")[:len(specs)]
+    names = ("admm", "admm_w1", "admm_aa", "admm_bdf2")[:len(specs)]
     for name, spec in zip(names, specs):
         methods.ADMM_VARIANTS[name] = spec
     cells = S.run_atlas(methods=names, knobs={n: knobs for n in names})
