@@ -353,12 +353,12 @@ class SolverADMMConfig:
             W_y = w0 E_b A R^2 / (4 v^3) (Sec. 4.4) [-].  Default 1; the
             paper's value is 25 (``w0=25.0``).  Chosen by measurement
             (BENCHMARKS.md, issue 12, "Weights" and "Anderson acceleration"):
-            with the default Anderson acceleration the stability atlas (dt
+            with Anderson acceleration (opt-in) the stability atlas (dt
             1/24-1/384 s x 2-50 iterations x 4 rods) has 23 of 36 cells stable
             and accurate at w0 = 1 (w0 = 2: 20 of the 24 cells with 10-50
             iterations, w0 = 5: 16 of 24); plain, 18 at w0 = 1 and 5 at w0 = 25.
             Rods clamped horizontally with drag 8/s end 2 s within
-            0.015-0.19 % of L of their equilibrium (plain: 0.08-6.6 %; w0 = 25:
+            0.015-0.19 % of L with Anderson (plain, the default: 0.08-6.6 %; w0 = 25:
             5-48 %; ``benchmarks/probes/admm_convergence.py settle``,
             ``weight_scale.py``); the hang scene with the same drag within
             1.8e-4 L (``benchmarks/probes/hang_settle.py``).  Too large a W_y
