@@ -37,7 +37,7 @@ at window 5.
 
 import taichi as ti
 
-vec9 = ti.types.vector(9, float)
+from .fields import vec9
 
 #: A strand's Anderson history is dropped when its fixed-point residual grows by more than this
 #: factor in one iteration [-].

@@ -421,10 +421,10 @@ class SolverADMMConfig:
             solves them, as the paper does.
         anderson_window: Anderson acceleration of the iterations (:mod:`taichi_hair.anderson`): the
             number of past iterates each strand extrapolates from [-]; 0 is the paper's plain
-            iteration.  Default 0 (opt-in): with 5 iterations per step, or BDF2 at 10, it made the
-            Pareto cantilever's 2-4 cm rods with 1.25 mm edges unstable (BENCHMARKS.md).  Window 5 on the atlas (cells with 10-50
-            iterations stable and accurate: window 3: 20 of 24, 5: 21, 8: 22; plain: 16) at ~10 % per
-            iteration.  Not applied with contacts (``contacts`` or colliders): not measured there.
+            iteration.  Default 0 (opt-in): with 5 iterations per step, or BDF2 at 10, it left the
+            Pareto cantilever's 2-4 cm rods with 1.25 mm edges swinging (BENCHMARKS.md).  On the
+            atlas (cells with 10-50 iterations stable and accurate: window 3: 20 of 24, 5: 21, 8: 22;
+            plain: 16) at ~10-25 % per iteration.  Not applied with contacts (``contacts`` or colliders): not measured there.
     """
 
     iterations: int = 10

@@ -315,7 +315,7 @@ class SolverADMM(SolverBase):
                 admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                        control.body_rotation, state.vertex_position, state.edge_twist, state, b,
                                        g, v_air, cfg.air_viscosity, h, damping_scale, 1, weight_floor,
-                                       self.anderson, 0)
+                                       self.anderson, self.anderson.window)  # 0: not with contacts
                 t0 = self._tock("iterations", t0)
                 self.iteration_count += 1
         else:
