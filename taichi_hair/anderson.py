@@ -45,6 +45,18 @@ ANDERSON_RESTART = 4.0
 #: No mixing while a strand's residual |f| is below this times |u|: the differences of float32 iterates
 #: are then mostly round-off, and mixing them kept settled rods jittering at ~1e-3 of their length [-].
 ANDERSON_NOISE_FLOOR = 1e-5
+#: The window of ``SolverADMMConfig.anderson_window = None`` (the default) in the dynamic mode [-].
+ANDERSON_DEFAULT_WINDOW = 5
+#: Fewest iterations per step with which the mixing runs; below, the plain iteration [-].  Measured on
+#: the Pareto cantilever (1-30 cm rods, >= 16 edges, dt = 1/96 s, window 5, 1.5 s;
+#: ``benchmarks/probes/anderson_cantilever.py``, BENCHMARKS.md issue 12): with 5 iterations the 2-4 cm
+#: rods (0.6-1.25 mm edges) swing up through a cross-step mode of the warm-started duals that the plain
+#: iteration damps only slowly (the 3.9 cm rod's tip swings -11 to +7 mm after 1.5 s about its converged
+#: sag of 1.9 mm, which converged steps reach within 0.15 s); with 8 the 2 cm rod ends 3x further off than
+#: plain; with 10 and 30 every rod ends as close or closer (at 10: max tip error 0.04-4.0 % of L against
+#: 0.04-25.6 %).  Mixing only early in a short step (the last 2-3 iterations plain), damped mixing, mixing
+#: x only and a stricter restart did not remove it; without warm-started duals it is stable but biased.
+ANDERSON_MIN_ITERATIONS = 10
 #: Tikhonov term of the least-squares normal equations, relative to their trace [-].
 ANDERSON_REGULARISATION = 1e-10
 

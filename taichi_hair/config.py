@@ -421,10 +421,18 @@ class SolverADMMConfig:
             solves them, as the paper does.
         anderson_window: Anderson acceleration of the iterations (:mod:`taichi_hair.anderson`): the
             number of past iterates each strand extrapolates from [-]; 0 is the paper's plain
-            iteration.  Default 0 (opt-in): with 5 iterations per step, or BDF2 at 10, it left the
-            Pareto cantilever's 2-4 cm rods with 1.25 mm edges swinging (BENCHMARKS.md).  On the
-            atlas (cells with 10-50 iterations stable and accurate: window 3: 20 of 24, 5: 21, 8: 22;
-            plain: 16) at ~10-25 % per iteration.  Not applied with contacts (``contacts`` or colliders): not measured there.
+            iteration.  Default None (auto): 5 in the dynamic mode, 0 in the quasistatic one (there the
+            plain iteration lowered the energy monotonically on a 6 cm rod, the accelerated one reached
+            it in half the steps but rose by up to half the total drop on the way).  Applied only with at least
+            ``taichi_hair.anderson.ANDERSON_MIN_ITERATIONS`` (10) iterations per step and no contacts
+            (``contacts`` or colliders); otherwise the plain iteration runs (``model_choices`` says
+            which).  Measured (BENCHMARKS.md, issue 12): the atlas' rods settle in 2 s to 0.015-0.19 %
+            of L (plain 0.08-6.6 %); atlas cells with 10-50 iterations stable and accurate 21 of 24
+            (plain 16); on the Pareto cantilever with 10 or 30 iterations every rod as close or
+            closer to the converged trajectory than plain; with 5 iterations the 2-4 cm rods with 0.6-1.25 mm edges
+            swung up (a cross-step mode of the warm-started duals; with 8 the 2 cm rod
+            ended 3x further off than plain), hence the threshold.  Cost
+            ~10-25 % per iteration.
     """
 
     iterations: int = 10
@@ -442,7 +450,7 @@ class SolverADMMConfig:
     contacts: ContactConfig | None = None
     twist: Twist = Twist.AUTO
     integrator: Integrator = Integrator.BACKWARD_EULER
-    anderson_window: int = 0
+    anderson_window: int | None = None
 
     def __post_init__(self):
         owner = "SolverADMMConfig"
@@ -465,9 +473,10 @@ class SolverADMMConfig:
             )
         self.dual_frame = as_choice(DualFrame, owner, "dual_frame", self.dual_frame)
         _check_positive("SolverADMMConfig", "w0", self.w0)
-        if not (isinstance(self.anderson_window, int) and not isinstance(self.anderson_window, bool)
+        if self.anderson_window is not None and not (
+                isinstance(self.anderson_window, int) and not isinstance(self.anderson_window, bool)
                 and 0 <= self.anderson_window <= 16):
-            raise ValueError(f"SolverADMMConfig.anderson_window must be an integer in 0..16, "
+            raise ValueError(f"SolverADMMConfig.anderson_window must be None (auto) or an integer in 0..16, "
                              f"got {self.anderson_window!r}")
         if not (isinstance(self.inertia_floor, (int, float)) and math.isfinite(self.inertia_floor)
                 and self.inertia_floor >= 0):

@@ -82,6 +82,7 @@ def admm_iterations_strand(
     weight_floor: float,
     aa: ti.template(),
     window: ti.template(),
+    anderson_on: ti.i32,
 ):
     """``iterations`` ADMM iterations (Algorithm 1, lines 4a-4g) for every strand, strands in parallel.
 
@@ -94,7 +95,8 @@ def admm_iterations_strand(
         start = model.strand_vertex_start[s]
         m = model.strand_vertex_count[s]
         if ti.static(window > 0):
-            anderson_begin_strand(s, start, m, x, buf, aa)
+            if anderson_on:
+                anderson_begin_strand(s, start, m, x, buf, aa)
         for _it in range(iterations):
             # (a, c) Local elasticity solve and fused dual update, every pair of the strand.
             for k in range(m):
@@ -113,7 +115,8 @@ def admm_iterations_strand(
                 apply_position_update_at(i, model.vertex, x, buf)
             if ti.static(window > 0):
                 # Anderson mixing of (x, lambda_y) before the frames are rebuilt from x (anderson.py).
-                anderson_mix_strand(s, start, m, model.vertex, x, buf, aa, window, _it == iterations - 1)
+                if anderson_on:
+                    anderson_mix_strand(s, start, m, model.vertex, x, buf, aa, window, _it == iterations - 1)
             # (e) Frames: every edge's tangent first, then the reference twists.
             for k in range(m):
                 i = start + k

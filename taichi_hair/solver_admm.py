@@ -66,7 +66,7 @@ import taichi as ti
 
 from .solver_base import SolverBase
 from . import admm
-from .anderson import AndersonBuffers, anderson_begin, anderson_mix
+from .anderson import ANDERSON_DEFAULT_WINDOW, ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_begin, anderson_mix
 from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
 from .fields import SolverBuffers
@@ -157,12 +157,19 @@ class SolverADMM(SolverBase):
             self.contacts = ContactPipeline(model, ccfg, self._collider_set(colliders))
         #: Anderson acceleration of the iterations (anderson.py); not with contacts, whose projection
         #: couples strands inside an iteration (measured only without them).
-        window = cfg.anderson_window if self.contacts is None else 0
+        #: anderson_window None (auto): ANDERSON_DEFAULT_WINDOW in the dynamic mode, none in the quasistatic
+        #: one, whose plain iteration lowers the energy monotonically and the accelerated one does not.
+        requested = cfg.anderson_window if cfg.anderson_window is not None else \
+            (ANDERSON_DEFAULT_WINDOW if self.dynamic else 0)
+        window = requested if self.contacts is None else 0
         self.anderson = AndersonBuffers(model.vertex_count if window else 1,
                                         model.strand_count if window else 1, window)
         self.model_choices["acceleration"] = (
-            f"Anderson acceleration, window {window}" if window else
+            f"Anderson acceleration, window {window}, with >= {ANDERSON_MIN_ITERATIONS} iterations per step"
+            + ("" if cfg.iterations >= ANDERSON_MIN_ITERATIONS else f" (now {cfg.iterations}: plain)")
+            if window else
             "no acceleration (SolverADMMConfig.anderson_window = 0)" if cfg.anderson_window == 0 else
+            "no acceleration: the quasistatic mode (SolverADMMConfig.anderson_window = None)" if requested == 0 else
             "no acceleration: not used with contacts")
         #: Statistics of the last step's contacts (see ``ContactPipeline.statistics``).
         self.contact_stats = {}
@@ -229,6 +236,11 @@ class SolverADMM(SolverBase):
         self.buf.pair_admm_weight.from_numpy(weight.astype(f))
         self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
         self.host_pair_voronoi_bend = vstar
+
+    def _anderson_on(self) -> bool:
+        """Whether this step mixes (anderson.py): a history is allocated (window > 0, no contacts) and the
+        step has at least ANDERSON_MIN_ITERATIONS iterations (``config.iterations`` may change between steps)."""
+        return self.anderson.window > 0 and self.config.iterations >= ANDERSON_MIN_ITERATIONS
 
     def _continuous_iterations(self) -> set:
         """ADMM iterations (0-based) that begin with continuous-time detection: ``continuous_detections``
@@ -299,7 +311,7 @@ class SolverADMM(SolverBase):
             admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                    control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
                                    v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations, weight_floor,
-                                   self.anderson, self.anderson.window)
+                                   self.anderson, self.anderson.window, int(self._anderson_on()))
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
         elif self.schedule == Schedule.STRAND:
@@ -315,7 +327,7 @@ class SolverADMM(SolverBase):
                 admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                        control.body_rotation, state.vertex_position, state.edge_twist, state, b,
                                        g, v_air, cfg.air_viscosity, h, damping_scale, 1, weight_floor,
-                                       self.anderson, self.anderson.window)  # 0: not with contacts
+                                       self.anderson, self.anderson.window, 0)  # window 0: not with contacts
                 t0 = self._tock("iterations", t0)
                 self.iteration_count += 1
         else:
@@ -354,7 +366,8 @@ class SolverADMM(SolverBase):
         con = self.contacts
         ccd_at = self._continuous_iterations()
         aa = self.anderson
-        if aa.window > 0:
+        aa_on = self._anderson_on()
+        if aa_on:
             anderson_begin(m.strand, state.vertex_position, b, aa)
         for it in range(cfg.iterations):
             if it in ccd_at:
@@ -377,7 +390,7 @@ class SolverADMM(SolverBase):
                                           self._weight_floor)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
             admm.apply_position_update(m.vertex, state.vertex_position, b)
-            if aa.window > 0:
+            if aa_on:
                 # Anderson mixing of (x, lambda_y), strand by strand (anderson.py).
                 anderson_mix(m.strand, m.vertex, state.vertex_position, b, aa, aa.window, int(it == cfg.iterations - 1))
             t0 = self._tock("global", t0)

@@ -37,12 +37,13 @@ def _stand_in(strand_count: int) -> str:
 def eligible_methods(hair_hair: bool, colliders: bool) -> tuple[str, ...]:
     """Methods of the Pareto data that can simulate a scene with these features."""
     # BDF2 was measured without contacts only (the Pareto scenes have none): not offered with them.
+    # Anderson acceleration is not applied with contacts (SolverADMM): not offered with them either.
     admm = ("admm", "admm_w1", "admm_f64")
     if hair_hair:
         return admm
     if colliders:
         return admm + ("shape",)
-    return admm + ("admm_bdf2", "shape", "xpbd")
+    return admm + ("admm_aa", "admm_bdf2", "shape", "xpbd")
 
 
 def choose_for_scene(points, strand_count: int, vertex_count: int, fps: float, precision: str, hair_hair: bool,

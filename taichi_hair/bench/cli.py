@@ -15,7 +15,7 @@ STUDIES = ("stability", "pareto")
 
 #: Methods each study knows (the ADMM variants: :mod:`taichi_hair.bench.methods`).
 STUDY_METHODS = {"stability": ("admm", "admm_w1", "admm_aa", "admm_bdf2", "shape", "xpbd"),
-                 "pareto": ("admm", "admm_w1", "admm_bdf2", "admm_f64", "shape", "xpbd")}
+                 "pareto": ("admm", "admm_w1", "admm_aa", "admm_bdf2", "admm_f64", "shape", "xpbd")}
 
 
 def _parse_methods(text, study: str) -> tuple:
@@ -73,8 +73,8 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--full", action="store_true", help="the bigger grid (longer)")
     p.add_argument("--methods", default=None,
-                   help="comma-separated subset of admm (w0 = 25, plain: the paper), admm_w1 (w0 = 1: "
-                        "the default), admm_aa (w0 = 1, Anderson; stability only), admm_bdf2 (w0 = 1, "
+                   help="comma-separated subset of admm (w0 = 25, plain: the paper), admm_w1 (w0 = 1, "
+                        "plain), admm_aa (w0 = 1, Anderson: the default), admm_bdf2 (w0 = 1, "
                         "BDF2), admm_f64 (pareto only), shape, xpbd (default: all)")
     p.add_argument("--duration", type=float, default=None, help="stability: simulated seconds per run")
     p.add_argument("--scenes", default="cantilever,swing,groom", help="pareto: comma-separated scenes")

@@ -32,9 +32,10 @@ by 0.12 % at 1/3840 s.
 
 Methods and knobs (default grid; ``--full`` adds more):
 
-* ``admm`` (w0 = 25, the paper's), ``admm_w1`` (w0 = 1, the default) and ``admm_bdf2`` (w0 = 1,
-  BDF2): dt in {1/96, 1/384} s x iterations in {5, 10, 30};  ``admm_f64``: w0 = 1 in double precision
-  (the precision knob), dt = 1/96 s, iterations in {10, 30}, run in the reference's process.
+* ``admm`` (w0 = 25, the paper's), ``admm_w1`` (w0 = 1, plain), ``admm_aa`` (w0 = 1, Anderson
+  acceleration from 10 iterations: the default) and ``admm_bdf2`` (w0 = 1, BDF2, plain): dt in
+  {1/96, 1/384} s x iterations in {5, 10, 30};  ``admm_f64``: w0 = 1 in double precision (the precision
+  knob), dt = 1/96 s, iterations in {10, 30}, run in the reference's process.
 * ``shape``: SolverShape Method 1, 2 and 3 (TressFX defaults for the shape stiffnesses) x
   local/length iterations in {2, 10} at dt = 1/96 s, and Method 2 with 10 iterations at 1/384 s.
 * ``xpbd``: SolverXPBD, dt = 1/96 s, substeps in {5, 20, 80}, one sweep each.
@@ -196,7 +197,7 @@ def assemble(scene_name: str, f32_results, f64_results, model, scene) -> tuple[l
 
 # --------------------------------------------------------------------------- outputs
 
-COLORS = {"admm": "C3", "admm_w1": "C1", "admm_bdf2": "C4", "admm_f64": "C5", "shape": "C0", "xpbd": "C2"}
+COLORS = {"admm": "C3", "admm_w1": "C1", "admm_aa": "C6", "admm_bdf2": "C4", "admm_f64": "C5", "shape": "C0", "xpbd": "C2"}
 
 
 def plot(points, infos: dict, path: str) -> None:

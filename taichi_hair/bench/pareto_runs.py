@@ -91,7 +91,7 @@ def shake_rotation(t: float) -> np.ndarray:
 # --------------------------------------------------------------------------- method runs
 @dataclass
 class RunSpec:
-    """One point: ``method`` (admm, admm_w1, admm_bdf2, admm_f64, admm_ref, shape, xpbd), dt [s] and its knobs."""
+    """One point: ``method`` (admm, admm_w1, admm_aa, admm_bdf2, admm_f64, admm_ref, shape, xpbd), dt [s] and its knobs."""
 
     method: str
     dt: float
@@ -116,7 +116,7 @@ def default_specs(full: bool = False) -> list[RunSpec]:
     """The f32 sweep (admm_f64 and the reference run in the f64 worker)."""
     specs = []
     its = (2, 5, 10, 30, 100) if full else (5, 10, 30)
-    for m in ("admm", "admm_w1", "admm_bdf2"):
+    for m in ("admm", "admm_w1", "admm_aa", "admm_bdf2"):
         for dt in ((1 / 48, 1 / 96, 1 / 384) if full else (1 / 96, 1 / 384)):
             specs += [RunSpec(m, dt, iterations=i) for i in its]
     for sm in (1, 2, 3):
