@@ -170,7 +170,9 @@ def test_thomas_and_pcr_give_the_same_motion():
             b.add_strand(straight(0.05 + 0.02 * i, 20 + 7 * i, origin=(0, 0, 0.01 * i)), HAIR)
         model = b.finalize()
         st, ctl = model.state(), model.control()
-        solver = SolverADMM(model, SolverADMMConfig(iterations=10, tridiagonal=method))
+        # The plain iteration: Anderson's restart and noise-floor branches turn the two solves' round-off
+        # into differences up to the iteration's convergence error (measured 1.8e-4 m here, anderson.py).
+        solver = SolverADMM(model, SolverADMMConfig(iterations=10, tridiagonal=method, anderson_window=0))
         assert solver.tridiagonal_method == method
         for _ in range(20):
             solver.step(st, ctl, 1 / 96)
