@@ -331,8 +331,9 @@ def test_soft_material_with_rest_length_correction_gets_a_warning_naming_the_str
 def test_stability_check_finds_an_upright_strand_above_its_self_weight_buckling_length():
     """A straight upright strand is an equilibrium with no rest moment at all (held), but above Greenhill's
     self-weight buckling length L_c = 1.986 (E I / (rho A g))^(1/3) (8.6 cm for human hair, R = 37 um) it is an
-    unstable one: check_stability (1 s without contacts, 1 um perturbation) flags the 15 cm strand (falls by
-    more than 1 mm) and neither the 4 cm upright one nor a short horizontal one."""
+    unstable one: check_stability (2 s without contacts, every strand tipped about its root by 0.1 mm at the
+    tip) flags the 15 cm strand (falls by more than 1 mm) and neither the 4 cm upright one nor a short
+    horizontal one (they stay within 0.2 mm: the perturbation itself is 0.1 mm)."""
     from taichi_hair.solvers.rest_pose import check_stability
 
     up = lambda L, n: np.c_[np.zeros(n), np.linspace(0.0, L, n), np.zeros(n)]  # noqa: E731
@@ -347,7 +348,7 @@ def test_stability_check_finds_an_upright_strand_above_its_self_weight_buckling_
     apply_rest_pose(model, res)
     check_stability(model, res, cfg)
     assert [s for s, _ in res.unstable] == [0], (res.unstable, res.strand_stability_drift)
-    assert res.strand_stability_drift[1] < 1e-4 and res.strand_stability_drift[2] < 1e-4
+    assert res.strand_stability_drift[1] < 2e-4 and res.strand_stability_drift[2] < 2e-4
     assert "unstable" in res.summary()
 
 
