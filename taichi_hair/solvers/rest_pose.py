@@ -111,6 +111,11 @@ class RestPoseResult:
     strand_residual: np.ndarray
     #: Strands that keep their authored rest pose, with the reason: [(strand, message)].
     unheld: list = field(default_factory=list)
+    #: Contact forces the body carries at x* (vertex_count, 3) [N] (None without a support; zero on strands
+    #: not held).
+    vertex_support_force: np.ndarray | None = None
+    #: Held strands whose support uses all the friction somewhere (|f_t| = mu f_n): they stay up by friction.
+    friction_limited: list = field(default_factory=list)
     #: Largest vertex drift of each strand in :func:`check_stability`'s run [m] (None until it ran).
     strand_stability_drift: np.ndarray | None = None
     #: Strands held (an equilibrium) but unstable, from :func:`check_stability`: [(strand, message)].
@@ -290,8 +295,35 @@ def equilibrium_residual(model, solver_config=None, gravity=(0.0, -9.81, 0.0), m
 
 
 # --------------------------------------------------------------------------- the solve
+def _tip_to_root_moments(h, G, t, Ja, Jb, dka, dkb, solve_s) -> np.ndarray:
+    """The moments mu (vertex_count, 3) [J] that balance the edge loads G of the strands ``solve_s``, tip to root:
+    edge j (local m-2 down to 1) fixes mu_j from G_j and mu_{j+1} (module docstring).  Linear in G."""
+    local = h["vertex_local_index"]
+    starts, counts = h["strand_vertex_start"], h["strand_vertex_count"]
+    count_v = counts[h["vertex_strand"]]
+    mu = np.zeros((G.shape[0], 3))
+    max_local = int(counts[solve_s].max()) if solve_s.any() else 0
+    for j in range(max_local - 2, 0, -1):
+        sel = solve_s & (counts - 2 >= j)
+        idx = starts[sel] + j                              # edge j of each strand = pair j's edge b
+        P = G[idx].copy()
+        tau = np.zeros(idx.size)
+        has_next = local[idx] + 1 <= count_v[idx] - 2       # pair j+1 exists
+        nx = idx[has_next] + 1
+        P[has_next] -= np.einsum("kij,ki->kj", Ja[nx], mu[nx])
+        tau[has_next] -= _dot(dka[nx], mu[nx])
+        P -= _dot(P, t[idx])[:, None] * t[idx]              # the tension went to the rest length
+        # [J_b^T ; dk_db^T] mu = [P ; tau]: 4 equations of rank 3, by the normal equations.
+        A = np.concatenate([np.transpose(Jb[idx], (0, 2, 1)), dkb[idx][:, None, :]], axis=1)   # (k, 4, 3)
+        rhs = np.concatenate([P, tau[:, None]], axis=1)
+        AtA = np.einsum("kri,krj->kij", A, A)
+        Atb = np.einsum("kri,kr->ki", A, rhs)
+        mu[idx] = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+    return mu
+
+
 def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config: RestPoseConfig | None = None,
-                    external_force=None, strands=None) -> RestPoseResult:
+                    external_force=None, strands=None, support=None, support_iterations: int = 2000) -> RestPoseResult:
     """Rest moments that make the Model's authored shape a static equilibrium (see the module docstring).
 
     Args:
@@ -303,6 +335,10 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
         external_force: optional (vertex_count, 3) further static loads on the vertices [N] (e.g. contact
             forces), added to the weights.
         strands: optional indices of the strands to solve (the others keep what the Model has).
+        support: optional :class:`~taichi_hair.solvers.rest_support.ContactSupport`: vertices the body may push
+            on at x*, with normals and friction; the body then carries what the rule of
+            :mod:`~taichi_hair.solvers.rest_support` gives it (contact forces in the Coulomb cones).
+        support_iterations: iterations of that cone program [-].
 
     Returns:
         a :class:`RestPoseResult`; apply it with :func:`apply_rest_pose`.
@@ -337,10 +373,26 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
         if ext.shape != (n, 3) or not np.all(np.isfinite(ext)):
             raise ValueError(f"solve_rest_pose: external_force must be a finite ({n}, 3) array")
         force = force + ext
-    G = _edge_loads(h, force)
     ghost = local == count_v - 1
-
     m1, m2, t, e, length = rest_frames(h)
+    kappa, Ja, Jb, dka, dkb = _pair_jacobians(h, measure)
+    load = force                                    # weights and given loads (the residual's scale)
+    support_force = np.zeros((n, 3))
+    friction_limited = np.zeros(ns, bool)
+    if support is not None:
+        # The body's share (rest_support.py): the smallest change of rest strain with forces in the cones.
+        from .rest_support import support_forces
+
+        vstar0 = pair_voronoi_length(h, scfg.voronoi_rescaling, np.asarray(h["edge_rest_length"], np.float64))
+        S0 = np.where(active[:, None], np.asarray(h["pair_bending_modulus"], np.float64) / vstar0[:, None], 0.0)
+
+        def moments_of(f):
+            return _tip_to_root_moments(h, _edge_loads(h, f), t, Ja, Jb, dka, dkb, solve_s)
+
+        support_force, friction_limited = support_forces(h, support, moments_of(force), moments_of, S0, solve_s,
+                                                         support_iterations)
+        force = force + support_force
+    G = _edge_loads(h, force)
     nlen = np.linalg.norm(e, axis=1)
     # Rest lengths from the tensions (free edges: local 1 .. m-2; the clamped root edge keeps its own).
     rest_len = np.asarray(h["edge_rest_length"], np.float64).copy()
@@ -354,33 +406,14 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
     vstar = pair_voronoi_length(h, scfg.voronoi_rescaling, rest_len)
     S = np.where(active[:, None], np.asarray(h["pair_bending_modulus"], np.float64) / vstar[:, None], 0.0)
 
-    kappa, Ja, Jb, dka, dkb = _pair_jacobians(h, measure)
-
     # Tip to root: edge j (local m-2 down to 1) fixes mu_j from G_j and mu_{j+1}.
-    mu = np.zeros((n, 3))
-    max_local = int(counts[solve_s].max()) if solve_s.any() else 0
-    for j in range(max_local - 2, 0, -1):
-        sel = solve_s & (counts - 2 >= j)
-        idx = starts[sel] + j                              # edge j of each strand = pair j's edge b
-        P = G[idx].copy()
-        tau = np.zeros(idx.size)
-        has_next = local[idx] + 1 <= count_v[idx] - 2       # pair j+1 exists
-        nx = idx[has_next] + 1
-        P[has_next] -= np.einsum("kij,ki->kj", Ja[nx], mu[nx])
-        tau[has_next] -= _dot(dka[nx], mu[nx])
-        P -= _dot(P, t[idx])[:, None] * t[idx]              # the tension went to the rest length
-        # [J_b^T ; dk_db^T] mu = [P ; tau]: 4 equations of rank 3, by the normal equations.
-        A = np.concatenate([np.transpose(Jb[idx], (0, 2, 1)), dkb[idx][:, None, :]], axis=1)   # (k, 4, 3)
-        rhs = np.concatenate([P, tau[:, None]], axis=1)
-        AtA = np.einsum("kri,krj->kij", A, A)
-        Atb = np.einsum("kri,kr->ki", A, rhs)
-        mu[idx] = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+    mu = _tip_to_root_moments(h, G, t, Ja, Jb, dka, dkb, solve_s)
 
     # kappa_bar = kappa - mu / S, and the statics' residual with the solved moments.
     safe = np.where(S > 0.0, S, 1.0)
     kbar = np.where(S > 0.0, kappa - mu / safe, kappa)
     resid = _statics_residual(h, G, mu, Ja, Jb, dka, dkb, t, active, ghost, local)
-    weight = np.maximum(np.bincount(strand_of, weights=np.linalg.norm(force, axis=1), minlength=ns), 1e-300)
+    weight = np.maximum(np.bincount(strand_of, weights=np.linalg.norm(load, axis=1), minlength=ns), 1e-300)
     strand_res = np.full(ns, np.nan)
     r = np.zeros(ns)
     np.maximum.at(r, strand_of, resid)
@@ -397,7 +430,9 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
         elif turn[s] > cfg.max_rest_turn or change[s] > cfg.max_rest_change:
             why = (f"it would need a rest turn of {turn[s]:.3g} (max_rest_turn {cfg.max_rest_turn:g}), "
                    f"{change[s]:.3g} from its authored turn (max_rest_change {cfg.max_rest_change:g}), to hold its "
-                   "own weight")
+                   "own weight" + (" with the body's support (friction at its limit)" if friction_limited[s] else
+                                   " with the body's support" if np.any(support_force[starts[s]:starts[s] + counts[s]])
+                                   else ""))
         elif strand_res[s] > cfg.residual_tolerance:
             why = f"residual {strand_res[s]:.2e} of its weight > {cfg.residual_tolerance:g}"
         if why is not None:
@@ -412,7 +447,10 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
     mu[kv] = 0.0 if old_mu is None else np.asarray(old_mu, np.float64)[kv]
     kbar[kv] = kappa[kv] - np.where(S[kv] > 0.0, mu[kv] / safe[kv], 0.0)
     rest_len[kv] = np.asarray(h["edge_rest_length"], np.float64)[kv]
+    support_force[kv] = 0.0
     return RestPoseResult(pair_rest_moment=mu, pair_rest_strain=kbar, edge_rest_length=rest_len,
+                          vertex_support_force=support_force if support is not None else None,
+                          friction_limited=[int(s) for s in np.nonzero(friction_limited & ~keep)[0]],
                           strand_rest_turn=turn, strand_residual=strand_res, unheld=unheld, measure=measure,
                           seconds=time.perf_counter() - t_start)
 
@@ -463,7 +501,7 @@ def _tipping_perturbation(h: dict, x0: np.ndarray, free: np.ndarray, tip: float,
     vertex by a small angle about a random axis (seeded), the tip moving by ``tip`` [m]: the way an unstable
     strand falls (it tips over about its root), with no stretch."""
     rng = np.random.default_rng(seed)
-    starts, counts = h["strand_vertex_start"], h["strand_vertex_count"]
+    starts = h["strand_vertex_start"]
     axes = rng.normal(size=(starts.size, 3))
     axes /= np.maximum(np.linalg.norm(axes, axis=1), 1e-300)[:, None]
     strand = h["vertex_strand"]
