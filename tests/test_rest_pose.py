@@ -416,24 +416,31 @@ def _floor_support(model, friction):
 
 
 def test_a_strand_lying_on_the_floor_needs_no_rest_moment_the_floor_carries_its_weight():
-    """Issue 14 item 1, contacts in the statics.  A horizontal 5 cm strand lying on a floor: the rule (the
-    smallest change of rest strain, forces in the Coulomb cones) has the exact optimum 0: each free vertex's
-    weight carried by the floor, f_i = -m_i g, and no moment anywhere.  Without the floor the root moment is
-    lambda L^2 / 2 (the test above).  Tolerances: moments below 1e-4 of the unsupported root moment; the
+    """Issue 14 item 1, contacts in the statics.  A horizontal 30 cm strand lying on a floor (alone it is not
+    held: it would need a rest turn of ~1.4 rad per edge at the root): the rule (the smallest change of rest
+    strain, forces in the Coulomb cones) has the exact optimum 0: each free vertex's weight carried by the
+    floor, f_i = -m_i g, and no moment anywhere.  A 5 cm strand beside it holds itself and gets no force
+    (support only for strands that cannot hold themselves).  Tolerances: moments below 1e-4 of the unsupported root moment; the
     floor's forces in total within 1e-3 of the weight, each within 3 % (the objective is flat in the forces:
     a vertex's force error of 1 % changes its neighbours' rest strain by ~2e-7; accelerated projected gradient,
     2,000 iterations, float64)."""
-    L, n = 0.05, 21
+    L, n = 0.30, 121
     b = GroomBuilder()
     b.add_strand(horizontal(L, n), HAIR)
+    b.add_strand(horizontal(0.05, 21) + [0.0, 0.0, 0.01], HAIR)
     model = b.finalize()
     g = np.array([0.0, -9.81, 0.0])
     bare = solve_rest_pose(model, SolverADMMConfig(), gravity=g)
+    assert [s for s, _ in bare.unheld] == [0]
     res = solve_rest_pose(model, SolverADMMConfig(), gravity=g, support=_floor_support(model, 0.3))
     assert not res.unheld and not res.friction_limited
-    root = np.linalg.norm(bare.pair_rest_moment[1])
-    assert np.abs(res.pair_rest_moment).max() < 1e-4 * root
+    x, mass = model.host["vertex_rest_position"], model.host["vertex_mass"]
+    root = np.linalg.norm(np.sum(np.cross(x[2:n] - x[1], mass[2:n, None] * g[None]), axis=0))  # unsupported
+    assert np.abs(res.pair_rest_moment[:n]).max() < 1e-4 * root
+    assert np.all(res.vertex_support_force[n:] == 0.0)       # the 5 cm strand holds itself
+    np.testing.assert_allclose(res.pair_rest_moment[n:], bare.pair_rest_moment[n:], rtol=1e-12)
     free = model.host["vertex_is_fixed"] == 0
+    free[n:] = False
     expected = -model.host["vertex_mass"][free, None] * g[None]
     assert abs(res.vertex_support_force[free, 1].sum() / expected[:, 1].sum() - 1.0) < 1e-3
     np.testing.assert_allclose(res.vertex_support_force[free], expected, atol=0.03 * np.abs(expected).max())
@@ -445,7 +452,7 @@ def test_a_strand_lying_on_the_floor_needs_no_rest_moment_the_floor_carries_its_
 @pytest.mark.parametrize("slope", [0.2, 0.5])
 def test_friction_carries_a_sideways_slope_up_to_mu_and_bending_carries_the_rest(slope):
     """The floor of the test above with gravity tilted sideways (across the strand, along z) by tan(alpha) =
-    ``slope``, friction mu = 0.3.  Within the cone (0.2 < mu) friction holds every vertex: no moment, the
+    ``slope``, friction mu = 0.3 (the 30 cm strand).  Within the cone (0.2 < mu) friction holds every vertex: no moment, the
     floor's force minus the weight.  Beyond it (0.5) each vertex's weight lies outside the cone, and the rule
     (smallest change of rest strain) takes the force nearest to it, the cone projection of the weight:
     f_n = m g cos(alpha) + mu q / (1 + mu^2) with q = m g (sin(alpha) - mu cos(alpha)) and |f_t| = mu f_n
@@ -453,7 +460,7 @@ def test_friction_carries_a_sideways_slope_up_to_mu_and_bending_carries_the_rest
     |r| = q / sqrt(1 + mu^2) for bending: the moment at the first free pair is |r| sum_{k>1} (x_k - x_1)
     (closed form; tolerances 1e-3 on the forces, 1 % on the moment), and the strand is reported as held by
     friction at its limit."""
-    L, n, mu = 0.05, 21, 0.3
+    L, n, mu = 0.30, 121, 0.3
     b = GroomBuilder()
     b.add_strand(horizontal(L, n), HAIR)
     model = b.finalize()

@@ -173,3 +173,60 @@ def support_forces(h: dict, support: ContactSupport, weight_moments: np.ndarray,
     limited = (fn > 0.0) & (ft >= 0.999 * fr * fn) & (fr * fn > 0.0)
     friction_limited[np.unique(vs[limited])] = True
     return forces, friction_limited
+
+
+def _signed_distance_and_normal(collider, p: np.ndarray):
+    """Signed distance (k,) [m] and outward unit normal (k, 3) of points p (k, 3) to one collider, in its
+    body frame (exact geometry: for a mesh the distance to its triangles, the normal from central
+    differences of that distance, the sign from the generalized winding number)."""
+    from ..contact.colliders import CapsuleCollider, MeshCollider, PlaneCollider, SphereCollider
+
+    if isinstance(collider, PlaneCollider):
+        n = np.asarray(collider.normal, np.float64)
+        return (p - np.asarray(collider.point)) @ n, np.tile(n, (len(p), 1))
+    if isinstance(collider, SphereCollider):
+        r = p - np.asarray(collider.center)
+        d = np.linalg.norm(r, axis=1)
+        return d - collider.radius, r / np.maximum(d, 1e-300)[:, None]
+    if isinstance(collider, CapsuleCollider):
+        a, b = np.asarray(collider.p0), np.asarray(collider.p1)
+        ab = b - a
+        s = np.clip((p - a) @ ab / max(float(ab @ ab), 1e-300), 0.0, 1.0)
+        r = p - (a + s[:, None] * ab)
+        d = np.linalg.norm(r, axis=1)
+        return d - collider.radius, r / np.maximum(d, 1e-300)[:, None]
+    if isinstance(collider, MeshCollider):
+        query = collider.triangle_query
+        d = query.signed_distance(p)
+        step = 1e-5
+        grad = np.stack([(query.unsigned_distance(p + step * e) - query.unsigned_distance(p - step * e)) / (2 * step)
+                         for e in np.eye(3)], axis=1)
+        grad *= np.where(d < 0.0, -1.0, 1.0)[:, None]
+        return d, grad / np.maximum(np.linalg.norm(grad, axis=1), 1e-300)[:, None]
+    raise ValueError(f"support_from_colliders: no support from a {type(collider).__name__}")
+
+
+def support_from_colliders(model, colliders, reach: float = 5e-4) -> ContactSupport:
+    """The free vertices of the Model's authored shape within ``reach`` [m] of a collider's surface (outside
+    it, distance from the fibre's surface, i.e. centre distance minus the strand's radius), with the
+    collider's outward normal and friction: the body may push on them (:func:`support_forces`).  Colliders
+    are taken in the frame the groom is authored in (their body frame); the nearest collider wins.
+
+    The reach, 0.5 mm by default, is a choice: a vertex that close leans on the body after a drift the
+    size of the reach, the sag-free target's scale (issue 14: 1 mm)."""
+    if not (np.isfinite(reach) and reach >= 0):
+        raise ValueError(f"support_from_colliders: reach must be a finite number >= 0, got {reach!r}")
+    h = model.host
+    x = np.asarray(h["vertex_rest_position"], np.float64)
+    free = np.nonzero(np.asarray(h["vertex_is_fixed"]) == 0)[0]
+    radius = np.array([m.radius for m in model.materials], np.float64)[np.asarray(h["vertex_strand"])[free]]
+    best = np.full(free.size, np.inf)
+    normal = np.zeros((free.size, 3))
+    friction = np.zeros(free.size)
+    for c in colliders:
+        d, n = _signed_distance_and_normal(c, x[free])
+        gap = d - radius
+        take = (gap >= -radius) & (gap <= reach) & (gap < best)
+        best[take], normal[take], friction[take] = gap[take], n[take], float(c.friction)
+    sel = np.isfinite(best)
+    return ContactSupport(vertex=free[sel], normal=normal[sel], friction=friction[sel])
