@@ -498,3 +498,5 @@ def test_contact_support_rejects_bad_input():
         ContactSupport(vertex=[1], normal=[[0, 1, 0]], friction=-1)
     with pytest.raises(ValueError, match="twice"):
         ContactSupport(vertex=[1, 1], normal=[[0, 1, 0], [0, 1, 0]])
+    with pytest.raises(ValueError, match="support_for"):
+        RestPoseConfig(support_for="some")

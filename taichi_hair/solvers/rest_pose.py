@@ -79,18 +79,23 @@ class RestPoseConfig:
         residual_tolerance: largest force residual of a vertex, relative to the strand's weight, for the
             strand to count as held [-].
         rest_lengths: also solve the rest lengths (the tension's stretch); False keeps the authored lengths.
+        support_for: with a body support (``solve_rest_pose(support=...)``), which strands it may carry:
+            ``"unheld"`` those that cannot hold their own weight, ``"all"`` every strand that touches it.
     """
 
     max_rest_change: float = 1.0
     max_rest_turn: float = 1.9
     residual_tolerance: float = 1.0e-6
     rest_lengths: bool = True
+    support_for: str = "unheld"
 
     def __post_init__(self):
         if not (0.0 < self.max_rest_turn <= 2.0):
             raise ValueError(f"RestPoseConfig.max_rest_turn must be in (0, 2], got {self.max_rest_turn!r}")
         if not (self.max_rest_change > 0.0):
             raise ValueError(f"RestPoseConfig.max_rest_change must be > 0, got {self.max_rest_change!r}")
+        if self.support_for not in ("unheld", "all"):
+            raise ValueError(f"RestPoseConfig.support_for must be 'unheld' or 'all', got {self.support_for!r}")
         if not (self.residual_tolerance > 0.0):
             raise ValueError(f"RestPoseConfig.residual_tolerance must be > 0, got {self.residual_tolerance!r}")
 
@@ -347,7 +352,7 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
     from ..config import SolverADMMConfig
 
     t_start = time.perf_counter()
-    if support is not None and support.vertex.size:
+    if support is not None and support.vertex.size and (config or RestPoseConfig()).support_for == "unheld":
         # The body carries only strands that cannot hold themselves: a strand held without support keeps its
         # own rest pose (contacts carry nothing for it), since the simulated contacts hold a static load
         # less exactly than the rest pose does (benchmarks/probes/rest_pose_support.py: 5 short strands
