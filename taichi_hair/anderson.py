@@ -30,6 +30,16 @@ step.  The twist theta is not part of u: it gets its Newton step from the accele
 iteration.  The paper has no acceleration (it suggests momentum for slow quasistatic convergence);
 ``SolverADMMConfig.anderson_window = 0`` is the paper's plain iteration.
 
+Not the default (``SolverADMMConfig.anderson_window = 0``): on the bend-twist validation (64 naturally
+curved rods, twist solved, 50 iterations per step; scratch script /tmp/p/bt.py running
+``validation.bend_twist.run_bend_twist`` with the window forced) the plain iteration's 50 and 200
+iterations per step agree (largest vertex speed after 100 / 200 / 300 steps 4.82 / 2.26 / 1.05 and
+4.82 / 2.24 / 1.02 m/s) while window 5 gives 1.20 / 1.13 / 1.18 (50) and 0.73 / 0.64 / 0.75 (200): the mixed
+iteration settles on something else there.  Suspected, not shown: the twist theta is not part of the
+mixed iterate u, so with twist coupled to bending the accelerated map is not a fixed-point map of u.
+In the quasistatic mode the energy is no longer monotone (a 6 cm rod: it rose by up to half the total
+drop on the way, reaching rest in half the steps).
+
 Round-off: the restart and the noise floor are branches, so two implementations that differ only in
 round-off (Thomas and PCR, CPU and GPU) can take different branches and end up to the iteration's
 convergence error apart (four 5-11 cm rods, 20 steps: 1.8e-4 m; the plain iteration: < 1e-6 m).  The tests
@@ -50,8 +60,6 @@ ANDERSON_RESTART = 4.0
 #: No mixing while a strand's residual |f| is below this times |u|: the differences of float32 iterates
 #: are then mostly round-off, and mixing them kept settled rods jittering at ~1e-3 of their length [-].
 ANDERSON_NOISE_FLOOR = 1e-5
-#: The window of ``SolverADMMConfig.anderson_window = None`` (the default) in the dynamic mode [-].
-ANDERSON_DEFAULT_WINDOW = 5
 #: Fewest iterations per step with which the mixing runs; below, the plain iteration [-].  Measured on
 #: the Pareto cantilever (1-30 cm rods, >= 16 edges, dt = 1/96 s, window 5, 1.5 s;
 #: ``benchmarks/probes/anderson_cantilever.py``, BENCHMARKS.md issue 12): with 5 iterations the 2-4 cm

@@ -420,19 +420,16 @@ class SolverADMMConfig:
             ``model_choices`` says which it did and why); ``"solve"`` always
             solves them, as the paper does.
         anderson_window: Anderson acceleration of the iterations (:mod:`taichi_hair.anderson`): the
-            number of past iterates each strand extrapolates from [-]; 0 is the paper's plain
-            iteration.  Default None (auto): 5 in the dynamic mode, 0 in the quasistatic one (there the
-            plain iteration lowered the energy monotonically on a 6 cm rod, the accelerated one reached
-            it in half the steps but rose by up to half the total drop on the way).  Applied only with at least
+            number of past iterates each strand extrapolates from [-]; 0 (the default) is the paper's
+            plain iteration.  Opt-in: it mixes only with at least
             ``taichi_hair.anderson.ANDERSON_MIN_ITERATIONS`` (10) iterations per step and no contacts
-            (``contacts`` or colliders); otherwise the plain iteration runs (``model_choices`` says
-            which).  Measured (BENCHMARKS.md, issue 12): the atlas' rods settle in 2 s to 0.015-0.19 %
-            of L (plain 0.08-6.6 %); atlas cells with 10-50 iterations stable and accurate 21 of 24
-            (plain 16); on the Pareto cantilever with 10 or 30 iterations every rod as close or
-            closer to the converged trajectory than plain; with 5 iterations the 2-4 cm rods with 0.6-1.25 mm edges
-            swung up (a cross-step mode of the warm-started duals; with 8 the 2 cm rod
-            ended 3x further off than plain), hence the threshold.  Cost
-            ~10-25 % per iteration.
+            (``contacts`` or colliders).  Measured (BENCHMARKS.md, issue 12): the atlas' rods settle in 2 s
+            to 0.015-0.19 % of L (plain 0.08-6.6 %); atlas cells with 10-50 iterations stable and accurate
+            21 of 24 (plain 16); the Pareto cantilever at 10 iterations 0.24 % against 1.9 %.  Not the
+            default: on the bend-twist validation (naturally curved rods, twist solved) it converged to a
+            different motion than the plain iteration, whose 50 and 200 iterations per step agree (max
+            speed after 100 steps 4.82 / 4.82 m/s plain, 1.20 / 0.73 m/s with window 5).  Cost ~3-25 %
+            per iteration.
     """
 
     iterations: int = 10
@@ -450,7 +447,7 @@ class SolverADMMConfig:
     contacts: ContactConfig | None = None
     twist: Twist = Twist.AUTO
     integrator: Integrator = Integrator.BACKWARD_EULER
-    anderson_window: int | None = None
+    anderson_window: int = 0
 
     def __post_init__(self):
         owner = "SolverADMMConfig"
@@ -473,10 +470,9 @@ class SolverADMMConfig:
             )
         self.dual_frame = as_choice(DualFrame, owner, "dual_frame", self.dual_frame)
         _check_positive("SolverADMMConfig", "w0", self.w0)
-        if self.anderson_window is not None and not (
-                isinstance(self.anderson_window, int) and not isinstance(self.anderson_window, bool)
+        if not (isinstance(self.anderson_window, int) and not isinstance(self.anderson_window, bool)
                 and 0 <= self.anderson_window <= 16):
-            raise ValueError(f"SolverADMMConfig.anderson_window must be None (auto) or an integer in 0..16, "
+            raise ValueError(f"SolverADMMConfig.anderson_window must be an integer in 0..16, "
                              f"got {self.anderson_window!r}")
         if not (isinstance(self.inertia_floor, (int, float)) and math.isfinite(self.inertia_floor)
                 and self.inertia_floor >= 0):

@@ -66,7 +66,7 @@ import taichi as ti
 
 from .solver_base import SolverBase
 from . import admm
-from .anderson import ANDERSON_DEFAULT_WINDOW, ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_begin, anderson_mix
+from .anderson import ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_begin, anderson_mix
 from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
 from .fields import SolverBuffers
@@ -157,11 +157,7 @@ class SolverADMM(SolverBase):
             self.contacts = ContactPipeline(model, ccfg, self._collider_set(colliders))
         #: Anderson acceleration of the iterations (anderson.py); not with contacts, whose projection
         #: couples strands inside an iteration (measured only without them).
-        #: anderson_window None (auto): ANDERSON_DEFAULT_WINDOW in the dynamic mode, none in the quasistatic
-        #: one, whose plain iteration lowers the energy monotonically and the accelerated one does not.
-        requested = cfg.anderson_window if cfg.anderson_window is not None else \
-            (ANDERSON_DEFAULT_WINDOW if self.dynamic else 0)
-        window = requested if self.contacts is None else 0
+        window = cfg.anderson_window if self.contacts is None else 0
         self.anderson = AndersonBuffers(model.vertex_count if window else 1,
                                         model.strand_count if window else 1, window)
         self.model_choices["acceleration"] = (
@@ -169,7 +165,6 @@ class SolverADMM(SolverBase):
             + ("" if cfg.iterations >= ANDERSON_MIN_ITERATIONS else f" (now {cfg.iterations}: plain)")
             if window else
             "no acceleration (SolverADMMConfig.anderson_window = 0)" if cfg.anderson_window == 0 else
-            "no acceleration: the quasistatic mode (SolverADMMConfig.anderson_window = None)" if requested == 0 else
             "no acceleration: not used with contacts")
         #: Statistics of the last step's contacts (see ``ContactPipeline.statistics``).
         self.contact_stats = {}
