@@ -31,7 +31,7 @@ iteration.  The paper has no acceleration (it suggests momentum for slow quasist
 ``SolverADMMConfig.anderson_window = 0`` is the paper's plain iteration.
 
 Not the default (``SolverADMMConfig.anderson_window = 0``): on the bend-twist validation (64 naturally
-curved rods, twist solved, 50 iterations per step; scratch script /tmp/p/bt.py running
+curved rods, twist solved, 50 iterations per step; ``benchmarks/probes/anderson_bend_twist.py``, which runs
 ``validation.bend_twist.run_bend_twist`` with the window forced) the plain iteration's 50 and 200
 iterations per step agree (largest vertex speed after 100 / 200 / 300 steps 4.82 / 2.26 / 1.05 and
 4.82 / 2.24 / 1.02 m/s) while window 5 gives 1.20 / 1.13 / 1.18 (50) and 0.73 / 0.64 / 0.75 (200): the mixed
