@@ -500,3 +500,53 @@ def test_contact_support_rejects_bad_input():
         ContactSupport(vertex=[1, 1], normal=[[0, 1, 0], [0, 1, 0]])
     with pytest.raises(ValueError, match="support_for"):
         RestPoseConfig(support_for="some")
+
+
+def test_scene_rest_pose_support_lets_a_floor_carry_a_strand_that_cannot_hold_itself(tmp_path):
+    """[groom] rest_pose_support = "unheld": the scene's colliders carry the strands the sag-free solve cannot
+    hold alone.  A 30 cm strand lying 1 um above a floor (plane collider, friction 0.3): without support it is
+    reported as not held; with it, held, the floor's forces carrying its weight (total within 1e-3)."""
+    from taichi_hair.io import save_groom
+    from taichi_hair.io.groom import Groom
+    from taichi_hair.scene.file import load_scene
+
+    n = 121
+    pts = horizontal(0.30, n) + [0.0, HAIR.radius + 1e-6, 0.0]
+    save_groom(Groom(points=pts, strand_offsets=np.array([0, n]), units="m"), str(tmp_path / "strand.thair.npz"))
+    text = """[scene]
+frames = 1
+[groom]
+file = "strand.thair.npz"
+rest_pose = "sag-free"
+{support}
+[material]
+radius = {radius}
+[solver]
+type = "admm"
+[[colliders]]
+type = "plane"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 1.0, 0.0]
+friction = 0.3
+[[bodies]]
+preset = "still"
+"""
+    from taichi_hair.scene.file import SceneError
+
+    results = {}
+    for i, support in enumerate(("", 'rest_pose_support = "unheld"', 'rest_pose_support = "sometimes"')):
+        path = tmp_path / f"scene{i}.toml"
+        path.write_text(text.format(support=support, radius=HAIR.radius))
+        if "sometimes" in support:
+            with pytest.raises(SceneError, match="rest_pose_support"):
+                load_scene(str(path))
+            continue
+        scene = load_scene(str(path))
+        model = scene.build_model()
+        results[i] = scene.rest_pose_result
+    assert [s for s, _ in results[0].unheld] == [0]
+    res = results[1]
+    assert not res.unheld
+    free = model.host["vertex_is_fixed"] == 0
+    weight = 9.81 * model.host["vertex_mass"][free].sum()
+    assert abs(res.vertex_support_force[free, 1].sum() / weight - 1.0) < 1e-3

@@ -186,7 +186,7 @@ def register(sub) -> None:
                    help="largest change of a rest strain |kappa_bar - kappa| a held strand may need (default 1.0, "
                         "about 60 degrees per vertex)")
     p.add_argument("--no-check", action="store_true",
-                   help="skip the stability check (a 1 s dynamic run without contacts that finds the held strands "
+                   help="skip the stability check (a 2 s dynamic run without contacts that finds the held strands "
                         "whose equilibrium is unstable)")
     p.add_argument("--list", type=int, default=10, help="strands not held to name on stdout (default 10)")
     p.add_argument("--report", default=None, help="also write a JSON report here")

@@ -21,7 +21,9 @@ degrees; relative paths are relative to the scene file)::
     file = "../ponytail/tail.tfx"   # or a list of files, concatenated
     rest_pose = "authored"       # "sag-free": rest strains solved so the shape holds under gravity;
                                  # "file": the file's rest curve (rest points, e.g. from taichi-hair rest-pose)
-    rest_pose_check = false      # sag-free: also find the held strands that are unstable equilibria (a 1 s run)
+    rest_pose_check = false      # sag-free: also find the held strands that are unstable equilibria (a 2 s run)
+    rest_pose_support = "none"   # sag-free: "unheld" lets the colliders carry the strands that cannot hold
+                                 # themselves (contact forces in the Coulomb cones), "all" every strand on them
     scale = 0.0035               # file units -> metres (or units = "cm" / "mm" / "m" / "in")
     strands = 100                # optional: keep this many strands, evenly spaced through the file
     root = "clamped"             # "clamped" (roots follow `body`) or "free"
@@ -117,6 +119,8 @@ class Scene:
         model_builder: optional callable returning the Model (the built-in scenes use their own builders).
         rest_pose: "authored", "sag-free" or "file" ([groom] rest_pose; :mod:`taichi_hair.solvers.rest_pose`).
         rest_pose_check: also run ``check_stability`` after a sag-free solve ([groom] rest_pose_check).
+        rest_pose_support: ``"none"``, ``"unheld"`` or ``"all"``: which strands the colliders may carry in the
+            sag-free solve ([groom] rest_pose_support; :mod:`taichi_hair.solvers.rest_support`).
         rest_pose_result: the :class:`~taichi_hair.solvers.rest_pose.RestPoseResult` of the last
             :meth:`build_model` of a sag-free scene (None otherwise).
     """
@@ -140,6 +144,7 @@ class Scene:
     model_builder: object = None
     rest_pose: str = "authored"
     rest_pose_check: bool = False
+    rest_pose_support: str = "none"
     rest_pose_result: object = None
 
     @property
@@ -198,7 +203,20 @@ class Scene:
                              f"model (Discrete Elastic Rods); the scene's solver is {self.solver!r}")
         from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
 
-        result = solve_rest_pose(model, self.solver_config, gravity=self._gravity_in_body())
+        support, rcfg = None, None
+        if self.rest_pose_support != "none":
+            from ..solvers.rest_pose import RestPoseConfig
+            from ..solvers.rest_support import support_from_colliders
+
+            # Colliders on the roots' body share its frame; world colliders only while that body sits at
+            # the origin at time 0 (the frame the rest pose is solved in).
+            R, t = self.body_transforms(0.0)[self.root_body]
+            at_origin = np.allclose(R, np.eye(3)) and np.allclose(t, 0.0)
+            usable = [c for c in self.colliders if c.body == self.root_body or (c.body < 0 and at_origin)]
+            support = support_from_colliders(model, usable)
+            rcfg = RestPoseConfig(support_for=self.rest_pose_support)
+        result = solve_rest_pose(model, self.solver_config, gravity=self._gravity_in_body(), config=rcfg,
+                                 support=support)
         apply_rest_pose(model, result)
         if self.rest_pose_check:
             from ..solvers.rest_pose import check_stability
@@ -299,7 +317,8 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     scene = Scene(name=name, path=path, frames=frames, fps=fps, substeps=substeps, gravity=gravity, groom=groom,
                   root=root, root_body=body, material=material, solver=kind, solver_config=cfg, colliders=colliders,
                   bodies=bodies, output=resolve_path(base, output) if output else "", description=desc,
-                  rest_pose=gdesc.get("rest_pose", "authored"), rest_pose_check=bool(gdesc.get("rest_pose_check")))
+                  rest_pose=gdesc.get("rest_pose", "authored"), rest_pose_check=bool(gdesc.get("rest_pose_check")),
+                  rest_pose_support=gdesc.get("rest_pose_support", "none"))
     if scene.rest_pose == "sag-free" and kind != "admm":
         raise SceneError(f"{path}: [groom] rest_pose: 'sag-free' is solved for the ADMM model; the scene's "
                          f"[solver] type is {kind!r}")

@@ -65,6 +65,10 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
     check = t.get("rest_pose_check", "bool", False)
     if check:
         desc["rest_pose_check"] = True
+    support = t.get("rest_pose_support", "str", "none", lambda v: None if v in ("none", "unheld", "all") else
+                    f"must be 'none', 'unheld' or 'all', got {v!r}")
+    if support != "none":
+        desc["rest_pose_support"] = support
     desc.update(root=root, body=body)
     if rest_pose != "authored":  # (absent from the description otherwise: old checkpoints still resume)
         desc["rest_pose"] = rest_pose
