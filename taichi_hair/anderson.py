@@ -37,8 +37,9 @@ iterations per step agree (largest vertex speed after 100 / 200 / 300 steps 4.82
 4.82 / 2.24 / 1.02 m/s) while window 5 gives 1.20 / 1.13 / 1.18 (50) and 0.73 / 0.64 / 0.75 (200): the mixed
 iteration settles on something else there.  Suspected, not shown: the twist theta is not part of the
 mixed iterate u, so with twist coupled to bending the accelerated map is not a fixed-point map of u.
-In the quasistatic mode the energy is no longer monotone (a 6 cm rod: it rose by up to half the total
-drop on the way, reaching rest in half the steps).
+In the quasistatic mode the energy is no longer monotone (a scratch copy of
+``tests/test_solver.py::test_quasistatic_energy_decreases_monotonically`` with window 5, 6 cm rod: it rose
+by up to half the total drop on the way, reaching rest in half the steps).
 
 Round-off: the restart and the noise floor are branches, so two implementations that differ only in
 round-off (Thomas and PCR, CPU and GPU) can take different branches and end up to the iteration's

@@ -355,9 +355,9 @@ def solve_rest_pose(model, solver_config=None, gravity=(0.0, -9.81, 0.0), config
     if support is not None and support.vertex.size and (config or RestPoseConfig()).support_for == "unheld":
         # The body carries only strands that cannot hold themselves: a strand held without support keeps its
         # own rest pose (contacts carry nothing for it), since the simulated contacts hold a static load
-        # less exactly than the rest pose does (benchmarks/probes/rest_pose_support.py: 5 short strands
-        # over a sphere, 2 s: without support p90 drift 0.02 mm, with support wherever it lowers the rest
-        # change 1.8 mm).
+        # less exactly than the rest pose does (an earlier version of benchmarks/probes/rest_pose_support.py,
+        # with only its 5 short strands over a 5 cm sphere, 2 s: without support p90 drift 0.02 mm, with
+        # support wherever it lowers the rest change 1.8 mm).
         bare = solve_rest_pose(model, solver_config, gravity, config, external_force, strands)
         need = np.zeros(model.strand_count, bool)
         need[[s for s, _ in bare.unheld]] = True
