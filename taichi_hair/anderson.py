@@ -1,7 +1,7 @@
 """Anderson acceleration of the ADMM iterations, strand by strand (issue 12, item 5).
 
 Why.  One ADMM iteration of Algorithm 1 is a fixed-point map u <- G(u) of the iterate
-u = (x, lambda_y) (positions and scaled elasticity duals).  On hair its slowest mode is the
+u = (x, lambda_y, theta) (positions, scaled elasticity duals, twists).  On hair its slowest mode is the
 strand turning about its root (the cantilever's first bending mode): the penalty W_y |Bx - y|^2
 holds every edge *vector* where the last local step put it, so a rotation crosses the strand a
 little per iteration.  Measured on the stability atlas' rods (dt = 1/96 s, state 0.3 s into the
@@ -14,8 +14,10 @@ frame (no change).  The weights are not the lever; the iteration is.  Anderson a
 and optimization") extrapolates from the last ``window`` iterates, and turned the rods' settling at
 10 iterations per step from 0.02-6.6 % of L after 2 s to 0.02-0.5 % (BENCHMARKS.md, issue 12).
 
-What.  Type-II Anderson mixing per strand, after each iteration's global step and before the frames
-are rebuilt from x (so the local step of the next iteration sees consistent frames):
+What.  Type-II Anderson mixing per strand, at the end of each iteration (after the twist step (g)), of
+u = (x, lambda_y, theta * l_rest): theta times the edge's rest length, the displacement of turning an edge
+by theta, so that the least squares weighs positions, duals and twists alike.  The strand's frames are then
+rebuilt from the mixed x and theta, so that the next iteration's local step sees consistent frames:
 
     f_k = G(u_k) - u_k,   dF_j = f_{j+1} - f_j,   dG_j = G(u_{j+1}) - G(u_j)   (last ``window`` j)
     gamma = argmin |f_k - dF gamma|^2      (normal equations in float64, Tikhonov 1e-10 trace)
@@ -26,17 +28,25 @@ accelerated solver computes the same backward-Euler (or BDF2) step, only in fewe
 Safeguard: when a strand's residual |f_k| grows past ``ANDERSON_RESTART`` times the last one, or the
 least-squares weights are not finite, the strand's history is dropped and the plain iterate G(u_k)
 taken (a restart, as Zhang et al. 2019 do when the energy rises).  The history starts empty at every
-step.  The twist theta is not part of u: it gets its Newton step from the accelerated x each
-iteration.  The paper has no acceleration (it suggests momentum for slow quasistatic convergence);
-``SolverADMMConfig.anderson_window = 0`` is the paper's plain iteration.
+step.  The paper has no acceleration (it suggests momentum for slow quasistatic convergence);
+``SolverADMMConfig.anderson_window = 0`` is the paper's plain iteration.  (Until 2026-12 theta was left
+out of u and got its Newton step from the mixed x; putting it in did not change what follows.)
 
 Not the default (``SolverADMMConfig.anderson_window = 0``): on the bend-twist validation (64 naturally
 curved rods, twist solved, 50 iterations per step; ``benchmarks/probes/anderson_bend_twist.py``, which runs
 ``validation.bend_twist.run_bend_twist`` with the window forced) the plain iteration's 50 and 200
 iterations per step agree (largest vertex speed after 100 / 200 / 300 steps 4.82 / 2.26 / 1.05 and
-4.82 / 2.24 / 1.02 m/s) while window 5 gives 1.20 / 1.13 / 1.18 (50) and 0.73 / 0.64 / 0.75 (200): the mixed
-iteration settles on something else there.  Suspected, not shown: the twist theta is not part of the
-mixed iterate u, so with twist coupled to bending the accelerated map is not a fixed-point map of u.
+4.82 / 2.24 / 1.02 m/s) while window 5 gives 1.92 / 0.79 / 1.24 (50 iterations, theta mixed; 1.20 / 1.13 /
+1.18 with theta not mixed): the mixed iteration computes another motion.  What one step shows
+(``benchmarks/probes/anderson_one_step.py``: 60 plain steps, then one step from the same state with each
+method, against 3,000 plain iterations): the six worst rods are the 1.6-4.5 m ones with 120 edges, near
+their twist-bend buckling, where the plain iteration converges very slowly (3,000 and 6,000 iterations
+still differ by 5 mm) and Anderson's iterate wanders along the nearly flat direction instead of
+converging: 4.3 / 15.6 / 25.7 cm from the reference after 50 / 200 / 1,000 mixed iterations (plain 50:
+1.4 cm).  A residual-monotone restart (``ANDERSON_RESTART`` = 1) and a cap of the extrapolation at 2 or
+10 times the plain step did not make it converge (3-12 cm after 1,000).  The residual |f| is a poor
+measure of the error where the map's rate is ~1; a safeguard on the step's objective (Zhang et al. 2019
+check an energy) is the next thing to try.
 In the quasistatic mode the energy is no longer monotone (a scratch copy of
 ``tests/test_solver.py::test_quasistatic_energy_decreases_monotonically`` with window 5, 6 cm rod: it rose
 by up to half the total drop on the way, reaching rest in half the steps).
@@ -47,13 +57,13 @@ convergence error apart (four 5-11 cm rods, 20 steps: 1.8e-4 m; the plain iterat
 compare implementations on the plain iteration.
 
 Cost: per vertex and iteration, one pass writing the newest differences and the Gram sums
-(``window`` x ``window`` dot products of 9-vectors) and one mixing pass; ~0.4 kB of history per vertex
-at window 5.
+(``window`` x ``window`` dot products of 10-vectors), one mixing pass and, on mixed strands, a second
+frame pass; ~0.45 kB of history per vertex at window 5.
 """
 
 import taichi as ti
 
-from .fields import vec9
+vec10 = ti.types.vector(10, float)
 
 #: A strand's Anderson history is dropped when its fixed-point residual grows by more than this
 #: factor in one iteration [-].
@@ -85,13 +95,13 @@ class AndersonBuffers:
         n, m = vertex_count, max(int(window), 1)
         self.window = int(window)
         #: The current iterate u_k = (x [m], lambda_y [m]) before the iteration's plain step.
-        self.vertex_anderson_iterate = ti.field(vec9, n)
+        self.vertex_anderson_iterate = ti.field(vec10, n)
         #: G(u_{k-1}) and f_{k-1} = G(u_{k-1}) - u_{k-1} of the last iteration [m].
-        self.vertex_anderson_value = ti.field(vec9, n)
-        self.vertex_anderson_residual = ti.field(vec9, n)
+        self.vertex_anderson_value = ti.field(vec10, n)
+        self.vertex_anderson_residual = ti.field(vec10, n)
         #: Ring of the last ``window`` differences dG_j and dF_j [m].
-        self.vertex_anderson_dvalue = ti.field(vec9, (n, m))
-        self.vertex_anderson_dresidual = ti.field(vec9, (n, m))
+        self.vertex_anderson_dvalue = ti.field(vec10, (n, m))
+        self.vertex_anderson_dresidual = ti.field(vec10, (n, m))
         #: Per strand: number of stored differences (<= window) [-], slot of the next one [-],
         #: iterations since the last (re)start [-] and the last residual norm |f| [m].
         self.strand_anderson_count = ti.field(ti.i32, strand_count)
@@ -106,19 +116,23 @@ class AndersonBuffers:
 
 
 @ti.func
-def pack_iterate(x: ti.template(), buf: ti.template(), i: ti.i32) -> vec9:
+def pack_iterate(edge: ti.template(), x: ti.template(), theta: ti.template(), buf: ti.template(),
+                 i: ti.i32) -> vec10:
+    """u at vertex i: its position [m], the scaled duals of pair i [m] and the twist of edge i times the
+    edge's rest length [rad m], the displacement scale of turning an edge by theta, so that the least
+    squares weighs the three alike (ghost edges and pairs carry zeros that never change)."""
     p = x[i]
     d = buf.pair_dual[i]
-    return vec9(p[0], p[1], p[2], d[0], d[1], d[2], d[3], d[4], d[5])
+    return vec10(p[0], p[1], p[2], d[0], d[1], d[2], d[3], d[4], d[5], theta[i] * edge.edge_rest_length[i])
 
 
 @ti.func
-def anderson_begin_strand(s: ti.i32, start: ti.i32, m: ti.i32, x: ti.template(), buf: ti.template(),
-                          aa: ti.template()):
-    """Start strand s's history for a new step: u_0 = (x, lambda_y) as they are now."""
+def anderson_begin_strand(s: ti.i32, start: ti.i32, m: ti.i32, edge: ti.template(), x: ti.template(),
+                          theta: ti.template(), buf: ti.template(), aa: ti.template()):
+    """Start strand s's history for a new step: u_0 = (x, lambda_y, theta) as they are now."""
     for k in range(m):
         i = start + k
-        aa.vertex_anderson_iterate[i] = pack_iterate(x, buf, i)
+        aa.vertex_anderson_iterate[i] = pack_iterate(edge, x, theta, buf, i)
     aa.strand_anderson_count[s] = 0
     aa.strand_anderson_slot[s] = 0
     aa.strand_anderson_age[s] = 0
@@ -126,10 +140,12 @@ def anderson_begin_strand(s: ti.i32, start: ti.i32, m: ti.i32, x: ti.template(),
 
 
 @ti.func
-def anderson_mix_strand(s: ti.i32, start: ti.i32, m: ti.i32, vertex: ti.template(), x: ti.template(),
-                        buf: ti.template(), aa: ti.template(), window: ti.template(), last: ti.i32):
-    """Replace strand s's plain iterate G(u_k) (now in x and lambda_y) by the Anderson mix (module doc);
-    ``last`` != 0 on the step's last iteration, which keeps the plain iterate.
+def anderson_mix_strand(s: ti.i32, start: ti.i32, m: ti.i32, vertex: ti.template(), edge: ti.template(),
+                        x: ti.template(), theta: ti.template(), buf: ti.template(), aa: ti.template(),
+                        window: ti.template(), last: ti.i32) -> ti.i32:
+    """Replace strand s's plain iterate G(u_k) (now in x, lambda_y and theta) by the Anderson mix (module
+    doc); ``last`` != 0 on the step's last iteration, which keeps the plain iterate.  Returns 1 when the
+    strand was mixed: its frames must then be rebuilt from the mixed x and theta.
 
     Loops over the history run at run time over per-strand scratch (few instructions to compile)."""
     age = aa.strand_anderson_age[s]
@@ -139,7 +155,7 @@ def anderson_mix_strand(s: ti.i32, start: ti.i32, m: ti.i32, vertex: ti.template
     un2 = ti.f64(0.0)
     for k in range(m):
         i = start + k
-        g = pack_iterate(x, buf, i)
+        g = pack_iterate(edge, x, theta, buf, i)
         f = g - aa.vertex_anderson_iterate[i]
         fn2 += ti.cast(f.dot(f), ti.f64)
         un2 += ti.cast(g.dot(g), ti.f64)
@@ -228,24 +244,33 @@ def anderson_mix_strand(s: ti.i32, start: ti.i32, m: ti.i32, vertex: ti.template
                 u[1] = p[1]
                 u[2] = p[2]
             buf.pair_dual[i] = ti.types.vector(6, float)(u[3], u[4], u[5], u[6], u[7], u[8])
+            r = edge.edge_rest_length[i]
+            if edge.edge_is_fixed[i] == 0 and r > 0.0:
+                theta[i] = u[9] / r
+            else:
+                u[9] = theta[i] * r
         aa.vertex_anderson_iterate[i] = u
     aa.strand_anderson_count[s] = count
     aa.strand_anderson_slot[s] = slot
     aa.strand_anderson_age[s] = age + 1
     aa.strand_anderson_residual[s] = fn
+    return ti.i32(1) if mixed else ti.i32(0)
 
 
 @ti.kernel
-def anderson_begin(strand: ti.template(), x: ti.template(), buf: ti.template(), aa: ti.template()):
+def anderson_begin(strand: ti.template(), edge: ti.template(), x: ti.template(), theta: ti.template(),
+                   buf: ti.template(), aa: ti.template()):
     """Stage schedule: :func:`anderson_begin_strand` for every strand."""
     for s in strand.strand_vertex_start:
-        anderson_begin_strand(s, strand.strand_vertex_start[s], strand.strand_vertex_count[s], x, buf, aa)
+        anderson_begin_strand(s, strand.strand_vertex_start[s], strand.strand_vertex_count[s], edge, x, theta, buf,
+                              aa)
 
 
 @ti.kernel
-def anderson_mix(strand: ti.template(), vertex: ti.template(), x: ti.template(), buf: ti.template(),
-                 aa: ti.template(), window: ti.template(), last: ti.i32):
-    """Stage schedule: :func:`anderson_mix_strand` for every strand (after the global step)."""
+def anderson_mix(strand: ti.template(), vertex: ti.template(), edge: ti.template(), x: ti.template(),
+                 theta: ti.template(), buf: ti.template(), aa: ti.template(), window: ti.template(), last: ti.i32):
+    """Stage schedule: :func:`anderson_mix_strand` for every strand (after the twist step); the caller
+    rebuilds the frames."""
     for s in strand.strand_vertex_start:
-        anderson_mix_strand(s, strand.strand_vertex_start[s], strand.strand_vertex_count[s], vertex, x, buf, aa,
-                            window, last)
+        anderson_mix_strand(s, strand.strand_vertex_start[s], strand.strand_vertex_count[s], vertex, edge, x, theta,
+                            buf, aa, window, last)

@@ -18,13 +18,13 @@ for its strand, *all* iterations serially:
         position assembly     (assemble_position_at,    every vertex)
         Thomas solve          (thomas_strand,           3 right-hand sides)
         x += dx               (apply_position_update_at)
-        Anderson mixing       (anderson_mix_strand,     when anderson_window > 0)
         reference frames      (reference_frame_at,      every edge)
         reference twists      (reference_twist_at,      every pair; Bergou only)
         pair twist terms      (pair_twist_terms_at,     every pair)
         twist assembly        (assemble_twist_at,       every edge)
         Thomas solve          (thomas_strand,           1 right-hand side)
         theta += dtheta       (material_frame_at,       every edge)
+        Anderson mixing       (anderson_mix_strand,     when anderson_window > 0; then the frames again)
 
 or, when the twist unknowns are dropped (``twist_free``, ``frames.twist_choice``),
 the last four replaced by the twist-free frames (``twist_free_strand``).
@@ -96,7 +96,7 @@ def admm_iterations_strand(
         m = model.strand_vertex_count[s]
         if ti.static(window > 0):
             if anderson_on:
-                anderson_begin_strand(s, start, m, x, buf, aa)
+                anderson_begin_strand(s, start, m, model.edge, x, theta, buf, aa)
         for _it in range(iterations):
             # (a, c) Local elasticity solve and fused dual update, every pair of the strand.
             for k in range(m):
@@ -113,10 +113,6 @@ def admm_iterations_strand(
             for k in range(m):
                 i = start + k
                 apply_position_update_at(i, model.vertex, x, buf)
-            if ti.static(window > 0):
-                # Anderson mixing of (x, lambda_y) before the frames are rebuilt from x (anderson.py).
-                if anderson_on:
-                    anderson_mix_strand(s, start, m, model.vertex, x, buf, aa, window, _it == iterations - 1)
             # (e) Frames: every edge's tangent first, then the reference twists.
             for k in range(m):
                 i = start + k
@@ -141,3 +137,17 @@ def admm_iterations_strand(
                 for k in range(m):
                     i = start + k
                     material_frame_at(i, model.edge, theta, es, buf.tri_rhs1)
+            if ti.static(window > 0):
+                # Anderson mixing of u = (x, lambda_y, theta), then the frames of the mix (anderson.py).
+                if anderson_on:
+                    if anderson_mix_strand(s, start, m, model.vertex, model.edge, x, theta, buf, aa, window,
+                                           _it == iterations - 1):
+                        for k in range(m):
+                            i = start + k
+                            reference_frame_at(i, model.vertex, model.edge, model.strand, body_rotation, x, theta, es)
+                        if ti.static(with_reference_twist):
+                            for k in range(m):
+                                i = start + k
+                                reference_twist_at(i, model.pair, es)
+                        if ti.static(twist_free):
+                            twist_free_strand(start, m, model.edge, theta, es, False)

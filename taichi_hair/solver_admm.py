@@ -84,8 +84,8 @@ PRESTRESS_WEIGHT = 400.0
 #: Profiled stages.  The stage schedule fills local/global/frames/twist; the strand
 #: schedule records its fused ADMM loop under "iterations" (and the frame update
 #: before the loop under "frames").
-STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "iterations",
-          "correction", "end")
+STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "anderson",
+          "iterations", "correction", "end")
 _GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")  # finite-check order
 
@@ -363,7 +363,7 @@ class SolverADMM(SolverBase):
         aa = self.anderson
         aa_on = self._anderson_on()
         if aa_on:
-            anderson_begin(m.strand, state.vertex_position, b, aa)
+            anderson_begin(m.strand, m.edge, state.vertex_position, state.edge_twist, b, aa)
         for it in range(cfg.iterations):
             if it in ccd_at:
                 # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
@@ -385,9 +385,6 @@ class SolverADMM(SolverBase):
                                           self._weight_floor)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
             admm.apply_position_update(m.vertex, state.vertex_position, b)
-            if aa_on:
-                # Anderson mixing of (x, lambda_y), strand by strand (anderson.py).
-                anderson_mix(m.strand, m.vertex, state.vertex_position, b, aa, aa.window, int(it == cfg.iterations - 1))
             t0 = self._tock("global", t0)
             update_reference_frames(self.with_ref_twist, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
                                     state.vertex_position,
@@ -404,6 +401,13 @@ class SolverADMM(SolverBase):
                 t0 = self._tock("twist", t0)
                 update_material_frames(m.edge, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
             t0 = self._tock("frames", t0)
+            if aa_on:
+                # Anderson mixing of u = (x, lambda_y, theta), strand by strand, then the frames of the mix
+                # (anderson.py).
+                anderson_mix(m.strand, m.vertex, m.edge, state.vertex_position, state.edge_twist, b, aa, aa.window,
+                             int(it == cfg.iterations - 1))
+                self._update_frames(state, control)
+                t0 = self._tock("anderson", t0)
             self.iteration_count += 1
         return t0
 
