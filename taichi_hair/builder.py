@@ -7,7 +7,6 @@ and twists are computed from it, so a groom's curls are its rest state.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -17,11 +16,24 @@ from .model import Model
 ROOT_MODES = ("clamped", "free")
 
 
-def _perpendicular(t: np.ndarray) -> np.ndarray:
-    """A unit vector perpendicular to unit t (stable choice)."""
-    a = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    d = np.cross(t, a)
-    return d / np.linalg.norm(d)
+def _root_directors(t0: np.ndarray, given, first: int) -> np.ndarray:
+    """Unit root directors d1 of k strands, perpendicular to their unit root tangents t0 (k, 3): ``given``
+    (k, 3) made perpendicular, or, when None, a stable perpendicular of t0.  One code path for
+    :meth:`GroomBuilder.add_strand` and :meth:`GroomBuilder.add_strands`, so the two give the same bits
+    (numpy may round a scalar dot product and a row sum differently).  ``first``: index of the first strand,
+    for the message."""
+    if given is None:
+        a = np.where((np.abs(t0[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+        d1 = np.cross(t0, a)
+        return d1 / np.linalg.norm(d1, axis=1)[:, None]
+    d1 = np.array(given, dtype=np.float64).reshape(t0.shape[0], 3)
+    d1 = d1 - np.sum(d1 * t0, axis=1)[:, None] * t0
+    n = np.linalg.norm(d1, axis=1)
+    bad = np.nonzero(~np.isfinite(n) | (n < 1e-6))[0]
+    if bad.size:
+        raise ValueError(f"strand {first + int(bad[0])}: field 'root_director' must be finite and not "
+                         "parallel to the root edge")
+    return d1 / n[:, None]
 
 
 def _transport(u: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
@@ -164,16 +176,8 @@ class GroomBuilder:
                 raise ValueError(f"{where}: field 'twist' must hold {m} finite angles")
             tw = tw.copy()
             tw[-1] = 0.0
-        t0 = (pts[1] - pts[0]) / lengths[0]
-        if root_director is None:
-            d1 = _perpendicular(t0)
-        else:
-            d1 = np.asarray(root_director, dtype=np.float64).reshape(3)
-            d1 = d1 - np.dot(d1, t0) * t0
-            n = np.linalg.norm(d1)
-            if not math.isfinite(n) or n < 1e-6:
-                raise ValueError(f"{where}: field 'root_director' must be finite and not parallel to the root edge")
-            d1 = d1 / n
+        t0 = (pts[1:2] - pts[0:1]) / lengths[0]
+        d1 = _root_directors(t0, None if root_director is None else np.reshape(root_director, (1, 3)), idx)[0]
         self._points.append(pts)
         self._counts.append(np.array([m], dtype=np.int64))
         self._materials.append(material)
@@ -246,19 +250,7 @@ class GroomBuilder:
                 raise ValueError(f"{where}: field 'twist' must hold {pts.shape[0]} finite angles")
             tw[off[1:] - 1] = 0.0
         t0 = (pts[off[:-1] + 1] - pts[off[:-1]]) / lengths[off[:-1]][:, None]
-        if root_directors is None:
-            a = np.where((np.abs(t0[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
-            d1 = np.cross(t0, a)
-            d1 = d1 / np.linalg.norm(d1, axis=1)[:, None]
-        else:
-            d1 = np.array(root_directors, dtype=np.float64).reshape(ns, 3)
-            d1 = d1 - np.sum(d1 * t0, axis=1)[:, None] * t0
-            n = np.linalg.norm(d1, axis=1)
-            bad = np.nonzero(~np.isfinite(n) | (n < 1e-6))[0]
-            if bad.size:
-                raise ValueError(f"strand {first + int(bad[0])}: field 'root_director' must be finite and not "
-                                 "parallel to the root edge")
-            d1 = d1 / n[:, None]
+        d1 = _root_directors(t0, root_directors, first)
         self._points.append(pts)
         self._counts.append(counts)
         self._materials.extend([material] * ns)

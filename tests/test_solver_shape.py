@@ -108,6 +108,16 @@ class Rig:
         return st.positions()
 
 
+def rigid_fit_residual(p, q):
+    """(max |R p + t - q| over the vertices for the best rotation R and translation t (Kabsch), |t| of the
+    centres): the shape error of q against p with the rigid motion taken out, and the drift of the centre."""
+    pc, qc = p.mean(axis=0), q.mean(axis=0)
+    u, _, vt = np.linalg.svd((p - pc).T @ (q - qc))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return float(np.max(np.linalg.norm((p - pc) @ r.T + qc - q, axis=1))), float(np.linalg.norm(qc - pc))
+
+
 def edge_stretch(model, x, strands):
     """max |l / l0 - 1| over the real edges of the given strands."""
     h = model.host
@@ -289,9 +299,16 @@ def test_curly_strands_hold_their_rest_shape_without_gravity(curly_rig, method):
     rig = curly_rig
     solver = rig.configure(method, [ShapeRegion(global_stiffness=0.3, local_stiffness=0.8)])
     x = rig.run(solver, 120, gravity=(0.0, 0.0, 0.0))
-    # Up to rounding: the free strand's shortest-arc head (Method 3) drifts by ~1.6e-8 m per substep in
-    # single precision, with or without the follow-the-leader pass; 120 steps x 2 substeps stay within 5e-6 m.
-    assert np.max(np.abs(x - rig.rest)) < 5e-6
+    clamped = rig.vertices([k for k in range(8) if k != FREE_CURLY])
+    # Clamped strands: up to single-precision rounding (measured <= 4.4e-7 m; bound 2e-6 m).
+    assert np.max(np.abs(x[clamped] - rig.rest[clamped])) < 2e-6
+    # The free strand keeps its shape up to rounding (after the best rigid fit: measured 5e-8 m, bound
+    # 1e-6 m).  Its rigid motion is free: rounding leaves it a velocity of a few um/s, a random walk whose
+    # size depends on the machine's float code (1.6e-6 m here after 120 steps, 6.8e-6 m on another CPU), so
+    # the drift of its centre is bounded loosely (5e-5 m) and the velocities below.
+    free = rig.vertices([FREE_CURLY])
+    shape, centre = rigid_fit_residual(rig.rest[free], x[free].astype(np.float64))
+    assert shape < 1e-6 and centre < 5e-5
     assert np.max(np.abs(rig.state.vertex_velocity.to_numpy())) < 2e-4
 
 
