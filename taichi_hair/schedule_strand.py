@@ -60,6 +60,18 @@ from .tridiag import thomas_strand
 vec3 = ti.math.vec3
 
 
+@ti.func
+def strand_reference_frames(start, m, with_reference_twist: ti.template(), model: ti.template(),
+                            body_rotation: ti.template(), x: ti.template(), theta: ti.template(), es: ti.template()):
+    """Stage (e) for one strand: every edge's tangent and reference frame first, then (when the model has
+    them) the reference twists, which read the frames of both edges of a pair."""
+    for k in range(m):
+        reference_frame_at(start + k, model.vertex, model.edge, model.strand, body_rotation, x, theta, es)
+    if ti.static(with_reference_twist):
+        for k in range(m):
+            reference_twist_at(start + k, model.pair, es)
+
+
 @ti.kernel
 def admm_iterations_strand(
     measure: ti.template(),
@@ -114,13 +126,7 @@ def admm_iterations_strand(
                 i = start + k
                 apply_position_update_at(i, model.vertex, x, buf)
             # (e) Frames: every edge's tangent first, then the reference twists.
-            for k in range(m):
-                i = start + k
-                reference_frame_at(i, model.vertex, model.edge, model.strand, body_rotation, x, theta, es)
-            if ti.static(with_reference_twist):
-                for k in range(m):
-                    i = start + k
-                    reference_twist_at(i, model.pair, es)
+            strand_reference_frames(start, m, with_reference_twist, model, body_rotation, x, theta, es)
             if ti.static(twist_free):
                 # (f, g) replaced: the exact twist of a naturally straight round rod (none).
                 twist_free_strand(start, m, model.edge, theta, es, False)
@@ -142,12 +148,6 @@ def admm_iterations_strand(
                 if anderson_on:
                     if anderson_mix_strand(s, start, m, model.vertex, model.edge, x, theta, buf, aa, window,
                                            _it == iterations - 1):
-                        for k in range(m):
-                            i = start + k
-                            reference_frame_at(i, model.vertex, model.edge, model.strand, body_rotation, x, theta, es)
-                        if ti.static(with_reference_twist):
-                            for k in range(m):
-                                i = start + k
-                                reference_twist_at(i, model.pair, es)
+                        strand_reference_frames(start, m, with_reference_twist, model, body_rotation, x, theta, es)
                         if ti.static(twist_free):
                             twist_free_strand(start, m, model.edge, theta, es, False)
