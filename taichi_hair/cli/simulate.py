@@ -4,7 +4,12 @@
     taichi-hair simulate assets/scenes/head_turn.toml --out out/head_turn.usd
     taichi-hair simulate assets/scenes/hairball.toml --out out/hb --frames 96 --resume
 
-SCENE is a built-in name (``hang``, ``hairball``) or a TOML scene file (:mod:`taichi_hair.scene.file`).
+SCENE is a built-in name (``hang``, ``hairball``), a TOML scene file (:mod:`taichi_hair.scene.file`) or a groom
+file, simulated as authored with ``--units``, ``--up``, ``--body MESH`` and ``--animation``
+(:mod:`taichi_hair.scene.groom_file`)::
+
+    taichi-hair simulate assets/ponytail/tail.tfx --scale 0.0035 --animation nod --frames 24 --out out/tail
+
 The output is chosen by the name given to ``--out``:
 
 - ``*.usd``, ``*.usda``, ``*.usdc``: one USD BasisCurves prim with time-sampled points (one time code
@@ -94,18 +99,42 @@ def _named_scene(args):
                  bodies=[body], description=desc, model_builder=builder, rest_pose=rest_pose)
 
 
+#: Options of a groom-file scene (``simulate GROOM_FILE``), with their defaults.
+GROOM_FILE_OPTIONS = dict(units=None, scale=None, up=None, body=None, body_units=None, animation=None, hair_hair=False)
+
+
+def _is_groom_file(name: str) -> bool:
+    from ..io import EXTENSIONS
+
+    low = name.lower()
+    return any(low.endswith(ext) for ext, fmt in EXTENSIONS.items() if fmt != "tfxmesh")
+
+
 def _load_scene(args):
+    given = [k for k, v in GROOM_FILE_OPTIONS.items() if getattr(args, k, v) != v]
+    groom_file = args.scene not in SCENES and _is_groom_file(args.scene)
+    if given and not groom_file:
+        where = ("set [groom] units / up and a [[colliders]] mesh in the scene file" if args.scene.endswith(".toml")
+                 else "the built-in scenes make their own groom and body")
+        raise CLIError(f"--{given[0].replace('_', '-')} applies to a groom file (simulate GROOM_FILE); {where}")
     if args.scene in SCENES:
         return _named_scene(args)
+    over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
+                length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous,
+                vertices_per_strand=args.vertices_per_strand, integrator=args.integrator, rest_pose=args.rest_pose)
+    if groom_file:
+        from ..scene.groom_file import scene_from_groom_file
+
+        return scene_from_groom_file(args.scene, over, units=args.units, scale=args.scale, up=args.up or "y", body=args.body,
+                                     body_units=args.body_units, animation=args.animation or "still",
+                                     hair_hair=args.hair_hair)
     if not args.scene.lower().endswith(".toml"):
-        raise CLIError(f"unknown scene {args.scene!r} (available: {', '.join(SCENES)}, or a .toml scene file)")
+        raise CLIError(f"unknown scene {args.scene!r} (available: {', '.join(SCENES)}, a .toml scene file or a "
+                       "groom file)")
     if not os.path.isfile(args.scene):
         raise CLIError(f"{args.scene}: no such scene file")
     from ..scene.file import load_scene
 
-    over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
-                length=args.length, seed=args.seed, iterations=args.iterations, continuous=args.continuous,
-                vertices_per_strand=args.vertices_per_strand, integrator=args.integrator, rest_pose=args.rest_pose)
     return load_scene(args.scene, over)
 
 
@@ -213,11 +242,32 @@ def _check_model_options(args, scene) -> None:
 
 def register(sub) -> None:
     s = sub.add_parser("simulate", help="run a scene headless and write its frames",
-                       description="Run a scene headless. SCENE: hang, hairball, or a .toml scene file. The "
+                       description="Run a scene headless. SCENE: hang, hairball, a .toml scene file or a "
+                                   "groom file (.tfx, .hair, .data, .ply, .obj, .usd, .thair.npz). The "
                                    "output is a USD file (.usd/.usda/.usdc, time samples), a native groom "
                                    "(.thair.npz, every frame) or a folder (per-frame files).")
     s.add_argument("scene", help="scene: hang (strands hanging from a nodding sphere, no contacts), hairball "
-                                 "(Daviet 2023 Sec. 5.2, frictional contacts) or a .toml scene file")
+                                 "(Daviet 2023 Sec. 5.2, frictional contacts), a .toml scene file, or a groom file")
+    g = s.add_argument_group("a groom file as the scene (simulate GROOM_FILE; a scene file sets the same in "
+                             "[groom] and [[colliders]])")
+    g.add_argument("--units", choices=("m", "cm", "mm", "in"), default=None,
+                   help="the groom file's length unit (default: metres, with a warning when the size says "
+                        "otherwise)")
+    g.add_argument("--scale", type=float, default=None, metavar="FACTOR",
+                   help="file units -> metres, for files in no standard unit (the TressFX ponytail: 0.0035); "
+                        "the body's too unless --body-units")
+    g.add_argument("--up", choices=("y", "z"), default=None,
+                   help="the file's up axis: z-up files are turned to the simulator's y-up (default y)")
+    g.add_argument("--body", default=None, metavar="MESH",
+                   help="a body mesh the hair collides with and whose roots follow it: OBJ, PLY, STL, OFF, "
+                        "glTF or TressFX .tfxmesh, in the groom's units and up axis unless --body-units")
+    g.add_argument("--body-units", choices=("m", "cm", "mm", "in"), default=None,
+                   help="the body mesh's length unit when it differs from the groom's")
+    g.add_argument("--animation", default=None, metavar="still|nod|turn|KEYS.toml",
+                   help="the body's motion: still (default), nod (15 deg, 1.5 s), turn (40 deg, 2 s) about "
+                        "the neck (the body's lowest point), or a TOML file of [[bodies]] tables")
+    g.add_argument("--hair-hair", action="store_true",
+                   help="hair-hair contacts on (friction 0.2, 2 + 10 projection sweeps; off by default)")
     s.add_argument("--out", default=None,
                    help="output: a .usd/.usda/.usdc file, a .thair.npz file, or a folder (frames.npz, "
                         "frames/, stats.csv, summary.json); default: the scene file's [scene] output")

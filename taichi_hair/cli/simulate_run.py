@@ -254,7 +254,8 @@ class SimulateRun:
             _atomic_savez(self.written, positions=self.frames[:completed + 1], fps=np.float64(scene.fps),
                           strand_vertex_start=model.host["strand_vertex_start"],
                           strand_vertex_count=model.host["strand_vertex_count"],
-                          sphere_radius=np.float64(params.get("sphere_radius", params.get("ball_radius", 0.0))))
+                          sphere_radius=np.float64(params.get("sphere_radius", params.get("ball_radius", 0.0))),
+                          **_body_arrays(scene, completed))
         else:
             from ..io import save_groom
 
@@ -365,6 +366,23 @@ def _frame_groom(model, positions, radius, fps, frames=None):
         g.point_frames = np.ascontiguousarray(frames)
         g.frame_times = np.arange(frames.shape[0], dtype=np.float64)
     return g.validate()
+
+
+def _body_arrays(scene, completed: int) -> dict:
+    """The bodies for a render to pose (frames.npz): ``body_rotation`` (F, B, 3, 3) [-] and
+    ``body_translation`` (F, B, 3) [m] at every written frame's time, and per mesh collider k
+    ``collider_k_vertices`` (V, 3) [m, body frame], ``collider_k_faces`` (T, 3) and ``collider_k_body``."""
+    times = np.arange(completed + 1) / scene.fps
+    tf = [scene.body_transforms(float(t)) for t in times]
+    out = {"body_rotation": np.array([[R for R, _ in f] for f in tf], np.float64).reshape(len(times), -1, 3, 3),
+           "body_translation": np.array([[T for _, T in f] for f in tf], np.float64).reshape(len(times), -1, 3)}
+    for k, c in enumerate(scene.colliders):
+        mesh = getattr(c, "mesh", None)
+        if mesh is not None and hasattr(mesh, "faces"):
+            out[f"collider_{k}_vertices"] = np.asarray(mesh.vertices, np.float32)
+            out[f"collider_{k}_faces"] = np.asarray(mesh.faces, np.int32)
+            out[f"collider_{k}_body"] = np.int64(c.body)
+    return out
 
 
 def _atomic_text(path: str, write) -> None:

@@ -175,7 +175,7 @@ class MeshCollider:
 
         self._query = None
 
-        mesh, source = self.mesh, "mesh"
+        mesh, source = self.mesh, self.source  # (a Trimesh keeps the source it was given: its file's name)
         if isinstance(mesh, (str, bytes)) or hasattr(mesh, "__fspath__"):
             source = str(mesh)
             try:

@@ -147,6 +147,18 @@ class Groom:
                        point_frames=mul(self.point_frames), radius=mul(self.radius),
                        params=dict(self.params), units=new_units)
 
+    def z_up_to_y_up(self) -> "Groom":
+        """A copy turned from a z-up file's axes to the simulator's y-up ones: (x, y, z) -> (x, z, -y), a
+        rotation of -90 deg about x (points, rest pose and frames; radii, twists and units unchanged)."""
+
+        def turn(a):
+            if a is None:
+                return None
+            return np.stack([a[..., 0], a[..., 2], -a[..., 1]], axis=-1).astype(a.dtype, copy=False)
+
+        return replace(self, points=turn(self.points), rest_points=turn(self.rest_points),
+                       point_frames=turn(self.point_frames), params=dict(self.params))
+
     def per_vertex(self, values: np.ndarray) -> np.ndarray:
         """Expand a per-strand array (S, ...) to per-vertex (N, ...); per-vertex arrays pass through."""
         values = np.asarray(values)

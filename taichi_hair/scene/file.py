@@ -271,7 +271,15 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
         raise SceneError(f"{path}: cannot read the scene ({exc.strerror})") from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{path}: not valid TOML ({exc})") from None
-    base = os.path.dirname(os.path.abspath(path))
+    return scene_from_data(data, path, os.path.dirname(os.path.abspath(path)), overrides)
+
+
+def scene_from_data(data: dict, path: str, base: str, overrides: dict | None = None) -> Scene:
+    """A scene from the tables of a scene file already read (``data``, as ``tomllib`` gives them).
+
+    ``path`` names the source in messages; relative file names are relative to ``base``.  See
+    :func:`load_scene` for ``overrides``."""
+    overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
     for k in data:
         if k not in TOP_LEVEL:
             raise SceneError(f"{path}: unknown table or key {k!r} (known: {', '.join(TOP_LEVEL)})")
@@ -322,8 +330,49 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     if scene.rest_pose == "sag-free" and kind != "admm":
         raise SceneError(f"{path}: [groom] rest_pose: 'sag-free' is solved for the ADMM model; the scene's "
                          f"[solver] type is {kind!r}")
+    _warn_if_hair_far_from_colliders(scene)
     for k, c in enumerate(colliders):
         if c.body >= scene.body_count:
             raise SceneError(f"{path}: [colliders {k}] body: {c.body} is not a body of the scene (it has "
                              f"{scene.body_count}: add [[bodies]] tables, or -1 for the static world)")
     return scene
+
+
+def roots_near_collider(c, roots: np.ndarray) -> np.ndarray:
+    """Which roots (R, 3) [m, body frame] lie near a collider's surface: within a quarter of its size (a
+    mesh: nearest SDF voxel; a sphere or capsule: exact distance; a plane: everything is near)."""
+    if getattr(c, "sdf", None) is not None:
+        n = np.asarray(c.sdf.shape)
+        lo = np.asarray(c.origin, np.float64)
+        size = float(np.max(c.spacing * (n - 1)) / (1.0 + 2.0 * c.padding))
+        ijk = np.round((roots - lo) / c.spacing).astype(np.int64)
+        inside = np.all((ijk >= 0) & (ijk < n), axis=1)
+        near = np.zeros(len(roots), bool)
+        ii = ijk[inside]
+        near[inside] = np.abs(c.sdf[ii[:, 0], ii[:, 1], ii[:, 2]]) < 0.25 * size
+        return near
+    if hasattr(c, "p0"):
+        a, b = np.asarray(c.p0, np.float64), np.asarray(c.p1, np.float64)
+        u = np.clip((roots - a) @ (b - a) / max(float((b - a) @ (b - a)), 1e-30), 0.0, 1.0)
+        d = np.linalg.norm(roots - (a + u[:, None] * (b - a)), axis=1)
+        return np.abs(d - c.radius) < 0.25 * max(c.radius, float(np.linalg.norm(b - a)))
+    if hasattr(c, "center"):
+        d = np.linalg.norm(roots - np.asarray(c.center, np.float64), axis=1)
+        return np.abs(d - c.radius) < 0.5 * c.radius
+    return np.ones(len(roots), bool)
+
+
+def _warn_if_hair_far_from_colliders(scene) -> None:
+    """A warning when no strand root lies near any collider's surface: a groom and a body in different units
+    or up axes, which would otherwise run silently with no contact at all (or with the roots deep inside)."""
+    import warnings
+
+    if not scene.colliders or scene.groom is None or scene.groom.strand_count == 0:
+        return
+    roots = np.asarray(scene.groom.points, np.float64)[scene.groom.strand_offsets[:-1]]
+    if any(np.any(roots_near_collider(c, roots)) for c in scene.colliders):
+        return
+    rlo, rhi = roots.min(axis=0), roots.max(axis=0)
+    warnings.warn(f"{scene.path}: no strand root lies near a collider's surface (roots span "
+                  f"{np.round(rlo, 3).tolist()} to {np.round(rhi, 3).tolist()} m): check the units and the up "
+                  "axis of the groom and the body", UserWarning, stacklevel=2)

@@ -17,6 +17,38 @@ COLLIDER_TYPES = ("sphere", "capsule", "plane", "mesh")
 #: "file" (the file's rest curve, solvers/rest_curve.py).
 REST_POSES = ("authored", "sag-free", "file")
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+#: The up axis of a file: "y" (the simulator's: gravity along -y) or "z" (turned by (x, y, z) -> (x, z, -y)).
+UP_AXES = ("y", "z")
+#: Body meshes: trimesh's formats and TressFX's collision mesh.
+MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".tfxmesh")
+
+
+def load_body_mesh(path: str, scale: float = 1.0, up: str = "y"):
+    """A body mesh as a ``trimesh.Trimesh`` in metres and y-up: OBJ, PLY, STL, ... through trimesh, or a
+    TressFX ``.tfxmesh`` (its triangles; bones and skin weights are not used: the body moves rigidly).
+
+    Raises:
+        ValueError: naming the file (cannot be read, no triangles).
+    """
+    import trimesh
+
+    if path.lower().endswith(".tfxmesh"):
+        from ..io import read_tfxmesh
+
+        tm = read_tfxmesh(path)
+        mesh = trimesh.Trimesh(vertices=np.asarray(tm.vertices, np.float64),
+                               faces=np.asarray(tm.triangles, np.int64), process=False)
+    else:
+        try:
+            mesh = trimesh.load(path, force="mesh")
+        except Exception as exc:  # noqa: BLE001 - trimesh raises many types
+            raise ValueError(f"{path}: cannot load the mesh ({exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError(f"{path}: the mesh has no triangles")
+    v = np.asarray(mesh.vertices, np.float64) * scale
+    if up == "z":
+        v = np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1)
+    return trimesh.Trimesh(vertices=v, faces=np.asarray(mesh.faces), process=False)
 
 
 def resolve_path(base_dir: str, p: str) -> str:
@@ -86,6 +118,7 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
         if scale is not None and units is not None:
             t.fail("give 'scale' or 'units', not both")
         scale = scale if scale is not None else UNITS[units] if units else 1.0
+        up = t.get("up", "str", "y", lambda v: None if v in UP_AXES else f"must be 'y' or 'z', got {v!r}")
         fmt = t.get("format", "str", None)
         strands = t.get("strands", "int", None, at_least(1))
         if "strands" in overrides:
@@ -119,6 +152,9 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
                      for g in parts]
             radius = np.concatenate(radii) if all(r is not None for r in radii) else None
             groom = Groom.from_polylines(polys, radius=radius, units="m")
+        if up == "z":
+            groom = groom.z_up_to_y_up()
+            desc["up"] = up  # (absent for y: old checkpoints still resume)
         if strands is not None:
             groom = subsample_groom(groom, strands)
         desc.update(file=[resolve_path(base, f) for f in files], scale=scale, strands=groom.strand_count)
@@ -182,22 +218,27 @@ def collider_from_table(t: Table, base: str):
             p = resolve_path(base, f)
             if not os.path.exists(p):
                 t.fail(f"no such file: {p}", "file")
-            scale = t.get("scale", "float", 1.0, positive)
+            scale = t.get("scale", "float", None, positive)
+            units = t.get("units", "str", None, lambda v: None if v in UNITS else
+                          f"must be one of {', '.join(UNITS)}, got {v!r}")
+            if scale is not None and units is not None:
+                t.fail("give 'scale' or 'units', not both")
+            scale = scale if scale is not None else UNITS[units] if units else 1.0
+            up = t.get("up", "str", "y", lambda v: None if v in UP_AXES else f"must be 'y' or 'z', got {v!r}")
             res = t.get("resolution", "int", 64)
             pad = t.get("padding", "float", 0.15)
             thick = t.get("thickness", "float", 1e-3)
             t.done()
             mesh = p
-            if scale != 1.0:
-                import trimesh
-
+            if scale != 1.0 or up != "y" or p.lower().endswith(".tfxmesh"):
                 try:
-                    mesh = trimesh.load(p, force="mesh")
-                except Exception as exc:  # noqa: BLE001 - trimesh raises many types
-                    t.fail(f"cannot load {p}: {exc}", "file")
-                mesh.apply_scale(scale)
-            c = MeshCollider(mesh=mesh, resolution=res, padding=pad, thickness=thick, **common)
+                    mesh = load_body_mesh(p, scale, up)
+                except ValueError as exc:
+                    t.fail(str(exc), "file")
+            c = MeshCollider(mesh=mesh, resolution=res, padding=pad, thickness=thick, source=p, **common)
             desc.update(file=p, scale=scale, resolution=res, padding=pad, thickness=thick)
+            if up != "y":
+                desc["up"] = up
     except ValueError as exc:
         t.fail(str(exc))
     t.done()
