@@ -2,7 +2,7 @@
 
     taichi-hair groom [GROOM]                                   # the window (apps/groom.py)
     taichi-hair groom GROOM --offscreen --script SESSION.json --out DIR
-    taichi-hair render GROOM --out still.png --eye 0 0.1 0.6 --target 0 0 0 --fov 35 --size 800 600
+    taichi-hair render GROOM --out still.png --eye 0 0.1 0.6 --target 0 0 0 --fov 35 --size 800 600  (cli/render.py)
     taichi-hair variants GROOM --count 12 --out DIR
 
 GROOM is any file :func:`taichi_hair.io.load_groom` reads; left out, a procedural groom
@@ -25,7 +25,7 @@ REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__fi
 
 
 # =========================================================================== shared set-up
-def _add_groom_source(p, optional: bool) -> None:
+def _add_groom_source(p, optional: bool, head_default: str | None = "default") -> None:
     if optional:
         p.add_argument("groom", nargs="?", default=None,
                        help="groom file (any format taichi-hair reads); default: a generated groom on the default head")
@@ -37,8 +37,10 @@ def _add_groom_source(p, optional: bool) -> None:
     p.add_argument("--strands", type=int, default=1000, help="strands of the generated default groom")
     p.add_argument("--vertices", type=int, default=16, help="vertices per strand of the generated default groom")
     p.add_argument("--seed", type=int, default=0, help="seed of the generated default groom")
-    p.add_argument("--head", default="default",
-                   help="head mesh: 'default' (assets/head.obj), 'none', or an OBJ/PLY/STL path [m]")
+    p.add_argument("--head", default=head_default,
+                   help="head mesh: 'default' (assets/head.obj), 'none', or an OBJ/PLY/STL path [m]"
+                        + ("" if head_default else "; default: the result's own bodies (none for a groom file, "
+                                                   "the default head for a generated groom)"))
 
 
 def load_groom_arg(args):
@@ -93,16 +95,19 @@ def load_head_mesh(head_arg):
     return np.asarray(v, np.float64), np.asarray(f, np.int64), path
 
 
-def _add_camera(p) -> None:
+def _add_camera(p, color_modes=("region", "strand", "groom", "uniform", "error"), default_color="region") -> None:
     p.add_argument("--eye", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="camera position [m]; default: framing the groom from the front-right")
     p.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="point looked at [m]; default: the centre of the groom's bounding box")
     p.add_argument("--fov", type=float, default=35.0, help="vertical field of view [degrees]")
     p.add_argument("--size", type=int, nargs=2, default=(640, 480), metavar=("W", "H"), help="image size [pixels]")
-    p.add_argument("--color", default="region", choices=["region", "strand", "groom", "uniform", "error"],
-                   help="strand colours: by region, by strand, the file's colours, uniform, or the skinning "
-                        "interpolation error (distance of each strand to its skinned reconstruction from the guides)")
+    p.add_argument("--color", default=default_color, choices=list(color_modes),
+                   help="strand colours: " + ("shaded hair (Kajiya-Kay, the default), or for debugging: "
+                                              if "shaded" in color_modes else "")
+                        + "by region, by strand, the file's colours, uniform, the skinning interpolation error "
+                          "(distance of each strand to its skinned reconstruction from the guides)"
+                        + (", edge strain against frame 0" if "strain" in color_modes else ""))
 
 
 def camera_from_args(args, points, head=None):
@@ -164,30 +169,6 @@ def _colors_for(groom, mode, selection=None):
 
 
 # =========================================================================== render
-def cmd_render(args) -> int:
-    from ..render import ViewerGGUI, save_png
-
-    w, h = _check_size(args)
-    groom = load_groom_arg(args)
-    head = load_head_mesh(args.head)
-    _init_taichi(args.arch, "f32")
-    cam = camera_from_args(args, groom.points, head)
-    viewer = ViewerGGUI(w, h, show_window=False)
-    viewer.set_camera(cam)
-    viewer.set_strands(groom.points, groom.strand_offsets, _colors_for(groom, args.color))
-    if head is not None:
-        viewer.set_head(head[0], head[1])
-    t0 = time.perf_counter()
-    viewer.render()
-    img = viewer.image()
-    viewer.close()
-    _make_parent(args.out)
-    save_png(args.out, img)
-    print(f"wrote {args.out}: {groom.strand_count} strands, {w}x{h}, eye {tuple(round(c, 4) for c in cam.eye)}, "
-          f"target {tuple(round(c, 4) for c in cam.target)}, fov {cam.fov:g}, {time.perf_counter() - t0:.2f} s")
-    return 0
-
-
 def _make_parent(path):
     d = os.path.dirname(os.path.abspath(path))
     os.makedirs(d, exist_ok=True)
@@ -356,12 +337,9 @@ def register(sub) -> None:
     p.add_argument("--autosave", default=None, help="window: autosave path (default: beside the groom file)")
     p.set_defaults(func=cmd_groom)
 
-    r = sub.add_parser("render", help="render a groom to a PNG off screen")
-    _add_groom_source(r, optional=False)
-    _add_camera(r)
-    r.add_argument("--out", required=True, help="PNG file to write")
-    r.add_argument("--arch", default="cpu", help="Taichi arch: cpu (default), cuda, gpu, vulkan")
-    r.set_defaults(func=cmd_render)
+    from .render import register as register_render
+
+    register_render(sub)
 
     v = sub.add_parser("variants", help="procedural variants of a groom (Sec. 5.3) and a contact sheet")
     _add_groom_source(v, optional=False)

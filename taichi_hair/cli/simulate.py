@@ -153,7 +153,7 @@ def _output_layout(out: str) -> dict:
                     frame_dir=os.path.join(out, "frames"), stats=os.path.join(out, "stats.csv"),
                     summary=os.path.join(out, "summary.json"), checkpoint=os.path.join(out, "checkpoint.npz"))
     return dict(kind=kind, dir=os.path.dirname(os.path.abspath(out)), file=out, stats=base + ".stats.csv",
-                summary=base + ".summary.json", checkpoint=base + ".checkpoint.npz")
+                summary=base + ".summary.json", checkpoint=base + ".checkpoint.npz", bodies=base + ".bodies.npz")
 
 
 # --------------------------------------------------------------------------- the command

@@ -262,6 +262,7 @@ class SimulateRun:
             self.written = layout["file"]
             save_groom(_frame_groom(model, None, self.radius, scene.fps, self.frames[:completed + 1]), self.written,
                        format="usd" if layout["kind"] == "usd" else "thair")
+            _atomic_savez(layout["bodies"], **_body_arrays(scene, completed))  # for a render to pose the bodies
         rows = self.stats_rows
 
         def write_stats(fh):

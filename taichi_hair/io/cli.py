@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import warnings
 
@@ -113,9 +114,33 @@ def _scale(value: str) -> float:
     return f
 
 
+def _is_result(path) -> bool:
+    """A folder that ``simulate`` wrote, or a frames.npz (positions of every frame)."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        return True
+    if path.lower().endswith(".npz") and not path.lower().endswith(".thair.npz") and os.path.isfile(path):
+        try:
+            with np.load(path) as probe:
+                return "positions" in probe.files
+        except (OSError, ValueError):
+            return False
+    return False
+
+
 def _load(path, fmt, scale) -> Groom:
     """load_groom with its warnings printed as one ``warning:`` line each, and a missing
     optional dependency (usd-core) reported as a ValueError so the main CLI prints one line."""
+    if fmt is None and _is_result(path):  # a simulate folder or its frames.npz: every frame, the last as points
+        from .result import load_result
+
+        res = load_result(path)
+        groom = res.groom(res.frame_count - 1)
+        groom.point_frames = np.ascontiguousarray(res.positions)
+        groom.frame_times = np.arange(res.frame_count, dtype=np.float64)
+        if res.fps:
+            groom.params = {"fps": res.fps, "usd_time_codes_per_second": res.fps}
+        return groom.scaled(scale, units="m") if scale is not None else groom
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -135,6 +160,7 @@ def cmd_convert(args) -> int:
     options = {}
     if args.ascii:
         options["ascii"] = True
+    os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
     try:
         save_groom(groom, args.output, format=args.to_format, **options)
     except ImportError as exc:
