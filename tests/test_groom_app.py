@@ -311,3 +311,16 @@ def test_variants_write_grooms_sheet_and_replayable_sessions(tmp_path, capsys):
     assert np.array_equal(s.groom.points, variants[k].points)
     assert np.array_equal(s.groom.rest_points, variants[k].rest_points)
     assert np.array_equal(s.groom.pinned, variants[k].pinned)
+
+
+def test_a_select_that_matches_nothing_warns_at_its_own_entry(tmp_path, capsys):
+    """A replayed select far from every strand: one warning line naming the session file and the action
+    (not only an error at the next edit)."""
+    groom_path = tmp_path / "base.thair.npz"
+    write_groom(groom_path)
+    script = tmp_path / "miss.json"
+    write_script(script, [{"action": "select", "center": [5.0, 5.0, 5.0], "radius": 0.01}])
+    assert main(["groom", str(groom_path), "--offscreen", "--script", str(script), "--out", str(tmp_path / "o")]
+                + COMMON) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "matched no strand" in ln]
+    assert len(lines) == 1 and lines[0].startswith("warning: ") and str(script) in lines[0], lines

@@ -16,7 +16,10 @@ from .common import CLIError
 
 # --------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
+
     p = argparse.ArgumentParser(prog="taichi-hair", description="Hair simulation on Taichi (Daviet 2023 ADMM).")
+    p.add_argument("--version", action="version", version=f"taichi-hair {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     # One module per command family; each owns its arguments and its work.
@@ -36,9 +39,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings as one ``warning: ...`` line on stderr (the message names its file, strand or field), not
+    Python's two lines with the source file, line number and code."""
+    text = " ".join(str(message).split("\n"))
+    print(f"warning: {text}", file=file if file is not None else sys.stderr)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    shown = warnings.showwarning
+    warnings.showwarning = _one_line_warning
     try:
         return args.func(args)
     except CLIError as exc:
@@ -53,6 +67,8 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":

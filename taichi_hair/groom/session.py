@@ -58,6 +58,7 @@ return results; :mod:`taichi_hair.groom` lists them) and owns the live simulatio
 from __future__ import annotations
 
 import inspect
+import warnings
 import os
 import time
 from dataclasses import replace
@@ -260,9 +261,13 @@ class GroomingSession:
             except TypeError as exc:
                 raise ValueError(f"{where}, action {name!r}: bad parameters ({exc})") from None
             try:
-                method(**params)
+                result = method(**params)
             except ValueError as exc:
                 raise ValueError(f"{where}, action {name!r}: {exc}") from None
+            if name.startswith("select") and result == 0 and params.get("mode", "replace") in ("replace", "add"):
+                name_of = f"{os.fspath(source)}: " if isinstance(source, (str, os.PathLike)) else ""
+                warnings.warn(f"{name_of}{where}, action {name!r}: matched no strand (an edit after it finds nothing "
+                              "selected)", UserWarning, stacklevel=2)
             if after_each is not None:
                 after_each(i, entry)
 

@@ -253,10 +253,52 @@ def describe_groom_size(groom: Groom) -> str:
 
 
 def check_plausible_units(groom: Groom, path="") -> None:
-    """Warn (``UnitsWarning``) when the groom's size is implausible for hair in metres."""
+    """Warn (``UnitsWarning``) when the groom's size is implausible for hair in metres; when it is plausible,
+    warn about implausible radii and degenerate edges (:func:`geometry_warnings`)."""
     msg = units_warning(groom, path)
     if msg:
         warnings.warn(msg, UnitsWarning, stacklevel=3)
+        return
+    for line in geometry_warnings(groom, path):
+        warnings.warn(line, UserWarning, stacklevel=3)
+
+
+#: Radii of human hair [m]: 17-90 um (fine to coarse); a radius outside 5 um to 0.25 mm is warned about.
+PLAUSIBLE_RADIUS_M = (5e-6, 2.5e-4)
+#: Edges shorter than this [m] are warned about: shorter than a hair is thick, they make the stretch
+#: stiffness (E A / l) and the bending weights (~ 1 / l^3) extreme and cost vertices for no shape.
+SHORT_EDGE_M = 2e-5
+
+
+def geometry_warnings(groom: Groom, path="") -> list:
+    """One-line warnings of a groom in metres: radii outside :data:`PLAUSIBLE_RADIUS_M` and edges shorter than
+    :data:`SHORT_EDGE_M`, naming the first strand and the count."""
+    where = f"{os.fspath(path)}: " if path else ""
+    out = []
+    if groom.radius is not None and groom.radius.size:
+        r = np.asarray(groom.radius, np.float64)
+        per_strand = r.shape[0] == groom.strand_count
+        lo, hi = PLAUSIBLE_RADIUS_M
+        bad = np.nonzero((r < lo) | (r > hi))[0]
+        if bad.size:
+            k = int(bad[0])
+            s = k if per_strand else int(np.searchsorted(groom.strand_offsets, k, side="right") - 1)
+            out.append(f"{where}strand {s}: radius {r[k] * 1e6:.4g} um is implausible for hair (human hair: "
+                       f"17-90 um; {bad.size} {'strands' if per_strand else 'vertices'} outside "
+                       f"{lo * 1e6:g}-{hi * 1e6:g} um); set the radius in [material] or the file")
+    p = np.asarray(groom.points, np.float64)
+    if p.shape[0] >= 2:
+        e = np.linalg.norm(p[1:] - p[:-1], axis=1)
+        real = np.ones(e.shape[0], bool)
+        real[groom.strand_offsets[1:-1] - 1] = False
+        short = np.nonzero(real & (e < SHORT_EDGE_M))[0]
+        if short.size:
+            k = int(short[0])
+            s = int(np.searchsorted(groom.strand_offsets, k, side="right") - 1)
+            out.append(f"{where}strand {s}: edge {k - int(groom.strand_offsets[s])} is {e[k] * 1e6:.3g} um long "
+                       f"({short.size} edges shorter than {SHORT_EDGE_M * 1e6:g} um): such edges make the rods "
+                       "extremely stiff; resample the strands")
+    return out
 
 
 def load_groom(path, format: str | None = None, scale: float | None = None, **options) -> Groom:

@@ -54,6 +54,11 @@ class HangScene:
         if self.length < 2 * self.edge_length:
             raise ValueError("HangScene.length must be at least two edges long")
 
+    @property
+    def vertex_count(self) -> int:
+        """Vertices :func:`build_hang` makes (before any is allocated) [-]."""
+        return self.strands * max(3, int(round(self.length / self.edge_length)) + 1)
+
 
 def _fibonacci_lower_cap(count: int, y_max: float) -> np.ndarray:
     """Unit normals spread evenly over the cap y <= y_max of the unit sphere (golden-angle spiral)."""
@@ -139,6 +144,11 @@ class HairballScene:
                 raise ValueError(f"HairballScene.{name} must be a finite positive number, got {v!r}")
         if not (math.isfinite(self.friction) and self.friction >= 0):
             raise ValueError(f"HairballScene.friction must be >= 0, got {self.friction!r}")
+
+    @property
+    def vertex_count(self) -> int:
+        """Vertices :func:`build_hairball` makes (before any is allocated) [-]."""
+        return self.strands * max(3, int(round(self.length / self.edge_length)) + 1)
 
 
 def build_hairball(scene: HairballScene):

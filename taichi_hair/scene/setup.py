@@ -156,6 +156,9 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
             groom = groom.z_up_to_y_up()
             desc["up"] = up  # (absent for y: old checkpoints still resume)
         if strands is not None:
+            if strands > groom.strand_count:
+                warnings.warn(f"{t.path}: [groom] strands: {strands:,} asked, the file has {groom.strand_count:,}; "
+                              "simulating all of them", UserWarning, stacklevel=2)
             groom = subsample_groom(groom, strands)
         desc.update(file=[resolve_path(base, f) for f in files], scale=scale, strands=groom.strand_count)
         return groom, root, body
