@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set-up on a fresh machine: system packages (Mesa's software Vulkan device, used by the GPU-path
-# tests and, later, off-screen GGUI rendering; g++ builds mesh2sdf from source), then the package with its
+# tests and off-screen GGUI rendering; Xvfb and xdotool for the window test; g++ builds mesh2sdf from source), then the package with its
 # test and benchmark extras.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -9,7 +9,8 @@ if command -v apt-get >/dev/null 2>&1; then
   if [ "$(id -u)" != "0" ]; then SUDO="sudo -n"; fi
   if $SUDO true 2>/dev/null; then
     $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq mesa-vulkan-drivers libvulkan1 g++ >/dev/null
+    # xvfb + xdotool: the grooming window opened on a virtual screen and driven by synthetic input (tests)
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq mesa-vulkan-drivers libvulkan1 g++ xvfb xdotool >/dev/null
   else
     echo "setup.sh: no root: skipping apt-get (mesa-vulkan-drivers); the Vulkan test will be skipped" >&2
   fi

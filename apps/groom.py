@@ -21,7 +21,8 @@ Mouse and keys (also listed in the side panel):
 * right drag orbits, middle drag (or shift + right drag) pans, ``-``/``=`` zoom (GGUI 1.7 reports no wheel);
 * keys: 1-5 tools, ``u`` undo, ``y`` redo, ``space`` simulation on/off, ``c`` cycles colours,
   ``g`` grows (x1.2) and ``h`` shortens (x0.8) the selection, ``k``/``l`` curl x1.25 / x0.8,
-  ``a`` selects all, ``s`` saves the groom, ``r`` reloads the groom file from disk (a file that fails
+  ``a`` selects all, ``s`` saves the groom, ``p`` writes a screenshot (PNG beside the autosave),
+  ``r`` reloads the groom file from disk (a file that fails
   to load leaves the current groom open and shows the loader's message), ``escape`` quits.
 """
 
@@ -238,6 +239,8 @@ class GroomApp:
                 self.open(self.groom_path)
         elif k in ("-", "="):
             self.zoom(1.1 if k == "-" else 1 / 1.1)
+        elif k == "p":
+            self.screenshot_requested = True  # taken by the window loop after the frame is drawn
         elif k == "Escape":
             return False
         return True
@@ -416,6 +419,15 @@ def run_window(args) -> int:
         last = (x, y)
         app.frame()
         _panel(app, window)
+        if getattr(app, "screenshot_requested", False):
+            from taichi_hair.render import save_png
+
+            app.screenshot_requested = False
+            shot = autosave[: -len(".thair.npz")] + ".screenshot.png" if autosave.endswith(".thair.npz") \
+                else autosave + ".screenshot.png"
+            save_png(shot, viewer.image())
+            app.message = f"screenshot: {shot}"
+            print(f"screenshot {shot}", flush=True)
         window.show()
     app.session.autosave()
     print(f"autosaved {autosave}")
