@@ -11,7 +11,7 @@ from taichi_hair.cli.main import main
 from taichi_hair.io import Groom, save_groom
 from taichi_hair.io.errors import GroomFormatError
 from taichi_hair.io.result import load_result
-from taichi_hair.shading import HairShading, arc_fraction, shade_strands, vertex_tangents
+from taichi_hair.groom.shading import HairShading, arc_fraction, shade_strands, vertex_tangents
 
 
 # --------------------------------------------------------------------------- shading (NumPy)

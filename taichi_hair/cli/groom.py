@@ -337,9 +337,6 @@ def register(sub) -> None:
     p.add_argument("--autosave", default=None, help="window: autosave path (default: beside the groom file)")
     p.set_defaults(func=cmd_groom)
 
-    from .render import register as register_render
-
-    register_render(sub)
 
     v = sub.add_parser("variants", help="procedural variants of a groom (Sec. 5.3) and a contact sheet")
     _add_groom_source(v, optional=False)

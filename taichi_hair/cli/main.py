@@ -26,6 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     from ..bench.cli import register as register_bench
     from .simulate import register as register_simulate
     from .groom import register as register_groom
+    from .render import register as register_render
     from .rest_pose import register as register_rest_pose
     from ..io.cli import register as register_io
     from ..validation.cli import register as register_validate
@@ -34,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     register_validate(sub)
     register_io(sub)
     register_groom(sub)
+    register_render(sub)
     register_rest_pose(sub)
     register_bench(sub)
     return p

@@ -165,7 +165,7 @@ def _merge(meshes):
 def cmd_render(args) -> int:
     from ..io.result import load_result
     from ..render import CameraConfig, ViewerGGUI, save_png
-    from ..shading import HAIR_BROWN, shade_strands
+    from ..groom.shading import HAIR_BROWN, shade_strands
     from ..progress import Progress
     from .groom import _check_size, _colors_for, camera_from_args, load_groom_arg
 

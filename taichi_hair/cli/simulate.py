@@ -94,7 +94,7 @@ def _named_scene(args):
         raise CLIError(f"--rest-pose file needs a groom file; the built-in scene {args.scene!r} generates its groom")
     if rest_pose != "authored":
         desc["rest_pose"] = rest_pose
-    from ..sizing import check_simulation
+    from ..io.sizing import check_simulation
 
     check_simulation(hs.vertex_count, d["frames"], args.scene == "hairball", f"simulate {args.scene} with "
                      f"{hs.strands:,} strands", "use fewer --strands or --frames")
@@ -181,7 +181,7 @@ def _load_scene_reporting(args):
 def cmd_simulate(args) -> int:
     scene, load_warnings = _load_scene_reporting(args)  # before ti.init: scene errors cost no start-up
     if scene.groom is not None:
-        from ..sizing import check_simulation
+        from ..io.sizing import check_simulation
 
         contacts = scene.solver == "admm" and getattr(scene.solver_config, "contacts", None) is not None
         check_simulation(scene.groom.vertex_count, scene.frames, contacts, f"simulate {scene.name}",

@@ -376,7 +376,7 @@ def generate_groom(surface: ScalpSurface, config: GeneratorConfig | None = None)
         if count < 1:
             raise ValueError(f"GeneratorConfig.density {cfg.density} gives no strand on a scalp of "
                              f"{surface.scalp_area():.4g} m^2")
-    from ..sizing import check_host
+    from ..io.sizing import check_host
 
     check_host(count * int(cfg.vertices_per_strand), f"generating {count:,} strands", "use fewer strands")
     roots, normals = sample_roots(surface, count, rng)

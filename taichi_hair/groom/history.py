@@ -172,3 +172,15 @@ def check_entry(index: int, entry, line, actions) -> tuple[str, str, dict]:
     if name not in actions:
         raise ValueError(f"{where}: unknown action {name!r}; known: {', '.join(actions)}")
     return where, name, {k: v for k, v in entry.items() if k != "action"}
+
+
+def warn_if_empty_select(source, where: str, name: str, params: dict, result) -> None:
+    """A replayed select (replace or add) that matched no strand: a warning at its own entry, naming the file."""
+    import os
+    import warnings
+
+    if name.startswith("select") and result == 0 and params.get("mode", "replace") in ("replace", "add"):
+        src = f"{os.fspath(source)}: " if isinstance(source, (str, os.PathLike)) else ""
+        warnings.warn(f"{src}{where}, action {name!r}: matched no strand (an edit after it finds nothing selected)",
+                      UserWarning, stacklevel=3)
+

@@ -58,7 +58,6 @@ return results; :mod:`taichi_hair.groom` lists them) and owns the live simulatio
 from __future__ import annotations
 
 import inspect
-import warnings
 import os
 import time
 from dataclasses import replace
@@ -249,9 +248,8 @@ class GroomingSession:
         tool renders a frame there).
 
         Raises:
-            ValueError naming the entry index (and the file's line), the action and the problem,
-            for an unknown action, an unknown or missing parameter or a bad value.  Actions before
-            the bad one stay applied.
+            ValueError naming the entry (and the file's line), the action and the problem (unknown action,
+            unknown, missing or bad parameter); actions before the bad one stay applied.
         """
         for i, (entry, line) in enumerate(hist.parse_log(source)):
             where, name, params = hist.check_entry(i, entry, line, ACTIONS)
@@ -264,10 +262,7 @@ class GroomingSession:
                 result = method(**params)
             except ValueError as exc:
                 raise ValueError(f"{where}, action {name!r}: {exc}") from None
-            if name.startswith("select") and result == 0 and params.get("mode", "replace") in ("replace", "add"):
-                name_of = f"{os.fspath(source)}: " if isinstance(source, (str, os.PathLike)) else ""
-                warnings.warn(f"{name_of}{where}, action {name!r}: matched no strand (an edit after it finds nothing "
-                              "selected)", UserWarning, stacklevel=2)
+            hist.warn_if_empty_select(source, where, name, params, result)
             if after_each is not None:
                 after_each(i, entry)
 
