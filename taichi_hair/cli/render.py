@@ -87,7 +87,6 @@ def strain_colors(points, rest_points, strand_offsets, vmax: float = 0.01) -> np
     e0 = np.linalg.norm(r[1:] - r[:-1], axis=1)
     strain = np.where(e0 > 0, e / np.where(e0 > 0, e0, 1.0) - 1.0, 0.0)
     strain[off[1:-1] - 1] = 0.0  # no edge across strands
-    v = np.zeros(n)
     a = np.zeros(n)
     a[:-1] = strain
     b = np.zeros(n)

@@ -249,6 +249,17 @@ class Scene:
         return make_solver(self.solver, model, self.solver_config, colliders=self.colliders, profile=profile)
 
 
+def read_toml(path: str, what: str) -> dict:
+    """The tables of a TOML file; a one-line SceneError naming the file when it cannot be read or parsed."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read {what} ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: not valid TOML ({exc})") from None
+
+
 def load_scene(path, overrides: dict | None = None) -> Scene:
     """Read and validate a TOML scene file.
 
@@ -264,13 +275,7 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     """
     path = os.fspath(path)
     overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot read the scene ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: not valid TOML ({exc})") from None
+    data = read_toml(path, "the scene")
     return scene_from_data(data, path, os.path.dirname(os.path.abspath(path)), overrides)
 
 
@@ -338,13 +343,22 @@ def scene_from_data(data: dict, path: str, base: str, overrides: dict | None = N
     return scene
 
 
+def mesh_box(c):
+    """(lo, hi) [m] of a mesh collider's body-frame bounding box: its SDF box less the padding."""
+    lo = np.asarray(c.origin, np.float64)
+    hi = lo + c.spacing * (np.asarray(c.sdf.shape) - 1)
+    pad = (hi - lo) * c.padding / (1.0 + 2.0 * c.padding)
+    return lo + pad, hi - pad
+
+
 def roots_near_collider(c, roots: np.ndarray) -> np.ndarray:
     """Which roots (R, 3) [m, body frame] lie near a collider's surface: within a quarter of its size (a
     mesh: nearest SDF voxel; a sphere or capsule: exact distance; a plane: everything is near)."""
     if getattr(c, "sdf", None) is not None:
         n = np.asarray(c.sdf.shape)
         lo = np.asarray(c.origin, np.float64)
-        size = float(np.max(c.spacing * (n - 1)) / (1.0 + 2.0 * c.padding))
+        lo_box, hi_box = mesh_box(c)
+        size = float(np.max(hi_box - lo_box))
         ijk = np.round((roots - lo) / c.spacing).astype(np.int64)
         inside = np.all((ijk >= 0) & (ijk < n), axis=1)
         near = np.zeros(len(roots), bool)

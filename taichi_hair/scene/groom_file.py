@@ -38,16 +38,9 @@ def _neck_pivot(points: np.ndarray) -> list:
 
 
 def _bodies_from_file(path: str) -> list:
-    import tomllib
+    from .file import read_toml
 
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot read the animation ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: not valid TOML ({exc})") from None
-    bodies = data.get("bodies")
+    bodies = read_toml(path, "the animation").get("bodies")
     if not isinstance(bodies, list) or not bodies:
         raise SceneError(f"{path}: an animation file needs [[bodies]] tables (a preset or keys; see "
                          "taichi_hair.scene.file)")
@@ -106,18 +99,15 @@ def groom_file_tables(groom_path: str, units: str | None = None, scale: float | 
 
 def scene_from_groom_file(groom_path: str, overrides: dict | None = None, **options):
     """A :class:`~taichi_hair.scene.file.Scene` for a groom file (options: :func:`groom_file_tables`)."""
-    from .file import scene_from_data
+    from .file import mesh_box, scene_from_data
 
     data = groom_file_tables(groom_path, **options)
     neck = [k for k, b in enumerate(data["bodies"]) if "keys" not in b and "pivot" not in b]
     scene = scene_from_data(data, groom_path, os.getcwd(), overrides)
     if neck:  # the presets turn about the neck, known once the groom and the body are in metres
         mesh = next((c for c in scene.colliders if getattr(c, "sdf", None) is not None), None)
-        if mesh is not None:  # the mesh's bounding box: its SDF box less the padding
-            lo = np.asarray(mesh.origin, np.float64)
-            hi = lo + mesh.spacing * (np.asarray(mesh.sdf.shape) - 1)
-            pad = (hi - lo) * mesh.padding / (1.0 + 2.0 * mesh.padding)
-            pts = np.array([lo + pad, hi - pad])
+        if mesh is not None:  # the mesh's bounding box
+            pts = np.array(mesh_box(mesh))
         else:
             pts = np.asarray(scene.groom.points, np.float64)[scene.groom.strand_offsets[:-1]]
         pivot = _neck_pivot(pts)

@@ -56,6 +56,18 @@ def resolve_path(base_dir: str, p: str) -> str:
     return p if os.path.isabs(p) else os.path.normpath(os.path.join(base_dir, p))
 
 
+def scale_and_up(t: Table):
+    """(file units -> metres [-], up axis) of a table's ``scale`` or ``units`` and ``up`` keys ([groom] and a
+    mesh [[colliders]] read them alike)."""
+    scale = t.get("scale", "float", None, positive)
+    units = t.get("units", "str", None, lambda v: None if v in UNITS else
+                  f"must be one of {', '.join(UNITS)}, got {v!r}")
+    if scale is not None and units is not None:
+        t.fail("give 'scale' or 'units', not both")
+    up = t.get("up", "str", "y", lambda v: None if v in UP_AXES else f"must be 'y' or 'z', got {v!r}")
+    return (scale if scale is not None else UNITS[units] if units else 1.0), up
+
+
 def subsample_groom(groom, count: int):
     """``count`` strands evenly spaced through the groom (all when it has fewer)."""
     from ..io.groom import Groom
@@ -112,13 +124,7 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
         files = [files] if isinstance(files, str) else files
         if not (isinstance(files, list) and files and all(isinstance(f, str) for f in files)):
             t.fail("must be a file name or a list of file names", "file")
-        scale = t.get("scale", "float", None, positive)
-        units = t.get("units", "str", None, lambda v: None if v in UNITS else
-                      f"must be one of {', '.join(UNITS)}, got {v!r}")
-        if scale is not None and units is not None:
-            t.fail("give 'scale' or 'units', not both")
-        scale = scale if scale is not None else UNITS[units] if units else 1.0
-        up = t.get("up", "str", "y", lambda v: None if v in UP_AXES else f"must be 'y' or 'z', got {v!r}")
+        scale, up = scale_and_up(t)
         fmt = t.get("format", "str", None)
         strands = t.get("strands", "int", None, at_least(1))
         if "strands" in overrides:
@@ -221,13 +227,7 @@ def collider_from_table(t: Table, base: str):
             p = resolve_path(base, f)
             if not os.path.exists(p):
                 t.fail(f"no such file: {p}", "file")
-            scale = t.get("scale", "float", None, positive)
-            units = t.get("units", "str", None, lambda v: None if v in UNITS else
-                          f"must be one of {', '.join(UNITS)}, got {v!r}")
-            if scale is not None and units is not None:
-                t.fail("give 'scale' or 'units', not both")
-            scale = scale if scale is not None else UNITS[units] if units else 1.0
-            up = t.get("up", "str", "y", lambda v: None if v in UP_AXES else f"must be 'y' or 'z', got {v!r}")
+            scale, up = scale_and_up(t)
             res = t.get("resolution", "int", 64)
             pad = t.get("padding", "float", 0.15)
             thick = t.get("thickness", "float", 1e-3)
