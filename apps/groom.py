@@ -392,6 +392,7 @@ def run_window(args) -> int:
                    groom_path=None if args.groom in (None, "default") else args.groom)
     window = viewer.window
     last = None
+    shown = False
     print(f"autosave: {autosave} (and its .session.json); compiling the kernels for the first frame can take "
           "a minute", flush=True)
     while window.running:
@@ -429,6 +430,9 @@ def run_window(args) -> int:
             app.message = f"screenshot: {shot}"
             print(f"screenshot {shot}", flush=True)
         window.show()
+        if not shown:
+            shown = True
+            print("window ready", flush=True)  # the first frame is on screen (tests wait for this line)
     app.session.autosave()
     print(f"autosaved {autosave}")
     return 0
