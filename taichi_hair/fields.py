@@ -270,6 +270,9 @@ class ContactFields:
         self.contact_collider = ti.field(ti.i32, c)
         #: Last local solve: 0 separating, 1 sticking, 2 sliding [-], shape (capacity,).
         self.contact_status = ti.field(ti.i32, c)
+        #: ``contact_status`` of the step's last ADMM projection, kept before the end-of-step correction
+        #: overwrites it (what the sticking/sliding counts and ``vertex_states`` report) [-], shape (capacity,).
+        self.contact_status_admm = ti.field(ti.i32, c)
         #: Penetration at the last statistics: -(signed gap) where the contact's sides overlap, else 0 [m];
         #: a hair pair that crossed has its gap measured along the normal kept on the begin-of-step side,
         #: so a crossing counts as more than r_a + r_b deep, shape (capacity,).

@@ -351,6 +351,13 @@ class SolverADMM(SolverBase):
             self.contact_stats = con.statistics(state.vertex_position)
         self._tock("end", t0)
 
+    def vertex_contact_state(self) -> np.ndarray:
+        """Per vertex after the last step: 0 free, 1 sticking, 2 sliding [-], int8, shape (vertex_count,)
+        (``ContactPipeline.vertex_states``; all 0 without contacts)."""
+        if self.contacts is None:
+            return np.zeros(self.model.vertex_count, np.int8)
+        return self.contacts.vertex_states(self.model.vertex_count)
+
     def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
                           t0: float) -> float:
         """Step 4 of Algorithm 1, "stage" schedule: a few kernels per iteration, each over all vertices.

@@ -71,8 +71,12 @@ def test_simulate_hairball_runs_with_contacts_and_reports_them(tmp_path):
     assert summary["frames"] == 3 and summary["diverged"] is None
     assert summary["max_penetration_m"] < 3.7e-5  # less than one hair radius
     assert "projection" in summary["stage_ms_per_step"] and "detection" in summary["stage_ms_per_step"]
-    pos = np.load(out / "frames.npz")["positions"]
+    data = np.load(out / "frames.npz")
+    pos = data["positions"]
     assert np.all(np.isfinite(pos))
+    # each frame's contact states (render --color contact): 0 free, 1 sticking, 2 sliding; frame 0 before any step
+    cst = data["vertex_contact_state"]
+    assert cst.shape == pos.shape[:2] and set(np.unique(cst)) <= {0, 1, 2} and not cst[0].any()
     # Roots stay on the ball (radius 9 cm) and no vertex ends inside it by more than the hair radius.
     assert np.linalg.norm(pos[-1], axis=1).min() > 0.09 - 1e-4
 

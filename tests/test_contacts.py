@@ -156,7 +156,8 @@ def test_rod_resting_on_a_plane_stays_there():
 
 def _incline_runs(angles_deg, mu, steps=48, dt=1 / 240, plane_deg=30.0):
     """A free rod (5 cm, 1 cm edges) lying along the slope of an inclined plane (through the origin), for each
-    slope angle of ``angles_deg``: (distance slid down the slope, largest distance off the plane).
+    slope angle of ``angles_deg``: (distance slid down the slope, largest distance off the plane, the
+    vertices' contact states after the last step: 1 sticking, 2 sliding).
 
     One plane (inclined by ``plane_deg``), one Model and one solver for every angle: the slope angle is the
     angle between gravity and the plane's normal, so each angle is the usual set-up (gravity straight down,
@@ -188,16 +189,19 @@ def _incline_runs(angles_deg, mu, steps=48, dt=1 / 240, plane_deg=30.0):
         for _ in range(steps):
             solver.step(st, ctl, dt)
         x = st.positions().astype(np.float64)
-        out.append((float((x.mean(0) - c0) @ down), float(np.abs((x - R * normal) @ normal).max())))
+        out.append((float((x.mean(0) - c0) @ down), float(np.abs((x - R * normal) @ normal).max()),
+                    solver.vertex_contact_state()))
     return out
 
 
 def test_incline_sticks_below_the_friction_angle_and_slides_with_coulomb_acceleration_above():
     mu = 0.4
     steps, dt = 48, 1 / 240
-    (along, off), *sliding = _incline_runs((15.0, 30.0, 45.0), mu, steps, dt)
+    (along, off, state), *sliding = _incline_runs((15.0, 30.0, 45.0), mu, steps, dt)
     assert abs(along) < 1e-6 and off < 0.05 * R  # tan 15 deg = 0.27 < 0.4: sticks
-    for angle, (along, off) in zip((30.0, 45.0), sliding):  # tan > mu: slides with a = g (sin - mu cos)
+    assert state.tolist() == [1] * 6  # and every vertex reports sticking (what render --color contact draws)
+    for angle, (along, off, state) in zip((30.0, 45.0), sliding):
+        assert state.tolist() == [2] * 6, (angle, state)  # tan > mu: slides with a = g (sin - mu cos)
         a = 9.81 * (math.sin(math.radians(angle)) - mu * math.cos(math.radians(angle)))
         # Backward Euler from rest: s_n = a dt^2 n (n + 1) / 2.
         expected = a * dt * dt * steps * (steps + 1) / 2

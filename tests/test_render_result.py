@@ -101,7 +101,8 @@ def vulkan():
 @pytest.fixture(scope="module")
 def result_dir(tmp_path_factory):
     """A hand-made simulate folder: 5 strands whose frame k is translated by k cm along x, and a body (a
-    box mesh) turned by 90 deg about y at frame 2."""
+    box mesh) turned by 90 deg about y at frame 2; contact states free at frames 0-1, and at frame 2 strand 0
+    sticking, strand 1 sliding."""
     d = tmp_path_factory.mktemp("res")
     g = Groom.from_polylines(_polylines(), units="m")
     pos = np.stack([g.points + np.float32([0.01 * k, 0, 0]) for k in range(3)])
@@ -109,7 +110,11 @@ def result_dir(tmp_path_factory):
 
     box = trimesh.creation.box(extents=(0.06, 0.06, 0.06))
     rot = np.stack([np.eye(3), np.eye(3), [[0, 0, 1], [0, 1, 0], [-1, 0, 0]]])[:, None]
-    np.savez(d / "frames.npz", positions=pos, fps=np.float64(24), strand_vertex_start=g.strand_offsets[:-1],
+    cst = np.zeros(pos.shape[:2], np.int8)
+    off = g.strand_offsets
+    cst[2, off[0]:off[1]], cst[2, off[1]:off[2]] = 1, 2
+    np.savez(d / "frames.npz", positions=pos, fps=np.float64(24), vertex_contact_state=cst,
+             strand_vertex_start=g.strand_offsets[:-1],
              strand_vertex_count=np.diff(g.strand_offsets), sphere_radius=np.float64(0),
              body_rotation=rot, body_translation=np.zeros((3, 1, 3)) + [0, 0.05, 0],
              collider_0_vertices=np.asarray(box.vertices, np.float32), collider_0_faces=np.asarray(box.faces),
@@ -189,6 +194,30 @@ def test_render_refuses_bad_options_in_one_line(result_dir, extra, message, caps
     rc = main(["render", str(result_dir)] + extra)
     err = capsys.readouterr().err.strip()
     assert rc == 2 and message in err and "\n" not in err, err
+
+
+def test_render_colours_sticking_blue_and_sliding_red(vulkan, result_dir, tmp_path, capsys):
+    """--color contact (CONTACT_COLORS): frame 2 has a sticking and a sliding strand, so blue-dominant
+    (b > r + 80) and red-dominant (r > b + 80) pixels; frame 0 is all free (grey): neither.  A result
+    without contact states is refused in one line."""
+    import matplotlib.image as mpimg
+
+    counts = []
+    for k in (0, 2):
+        out = tmp_path / f"c{k}.png"
+        assert main(["render", str(result_dir), "--frame", str(k), "--color", "contact", "--out", str(out)]
+                    + CAM) == 0
+        img = (mpimg.imread(out)[:, :, :3] * 255).astype(int)
+        counts.append((int((img[..., 2] > img[..., 0] + 80).sum()), int((img[..., 0] > img[..., 2] + 80).sum())))
+    assert counts[0] == (0, 0) and min(counts[1]) > 20, counts
+    data = dict(np.load(result_dir / "frames.npz"))
+    del data["vertex_contact_state"]
+    np.savez(tmp_path / "frames.npz", **data)
+    capsys.readouterr()
+    assert main(["render", str(tmp_path / "frames.npz"), "--color", "contact", "--out", str(tmp_path / "x.png")]
+                + CAM) == 2
+    err = capsys.readouterr().err.strip()
+    assert "has no contact states" in err and "\n" not in err, err
 
 
 def test_render_of_a_simulate_folder_round_trip(vulkan, tmp_path, capsys):

@@ -69,3 +69,23 @@ def test_more_strands_than_the_file_has_is_said(tmp_path):
     with pytest.warns(UserWarning, match=r"10,000 asked, the file has 255; simulating all of them"):
         scene = load_scene(s)
     assert scene.groom.strand_count == 255
+
+
+def test_a_usc_data_file_is_labelled_metres_only_when_its_size_is_hair_in_metres(tmp_path):
+    # USC-HairSalon's format carries no unit: a 20 cm strand stored in metres reads as "m"; the same groom
+    # stored in centimetres (a median of 20 "m") keeps unknown units and warns, instead of a wrong label.
+    import warnings
+
+    from taichi_hair.io import load_groom
+
+    t = np.linspace(0.0, 0.2, 9)
+    pts = np.concatenate([np.stack([np.full(9, 0.01 * s), -t, np.zeros(9)], axis=1) for s in range(20)])
+    g = Groom(points=pts.astype(np.float32), strand_offsets=np.arange(0, 181, 9))
+    save_groom(g, tmp_path / "m.data")
+    save_groom(g.scaled(100.0), tmp_path / "cm.data")
+    assert load_groom(tmp_path / "m.data").units == "m"
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        cm = load_groom(tmp_path / "cm.data")
+    assert cm.units == "" and any("centimetres" in str(x.message) for x in w)
+    assert load_groom(tmp_path / "cm.data", scale=0.01).units == "m"

@@ -9,10 +9,11 @@
 INPUT is anything :func:`taichi_hair.io.result.load_result` reads: the folder ``simulate`` writes (or its
 ``frames.npz``), a ``.thair.npz`` or USD file with frames, or any groom file (one frame); ``default`` draws
 a generated groom on the default head.  Bodies are drawn posed at each frame (the meshes and transforms
-``simulate`` wrote; the hairball's ball).  Hair is shaded (:mod:`taichi_hair.shading`: Kajiya-Kay
+``simulate`` wrote; the hairball's ball).  Hair is shaded (:mod:`taichi_hair.groom.shading`: Kajiya-Kay
 highlights, root-to-tip darkening) in the file's colour or ``--hair-color``; ``--color`` picks a debug
 colouring instead: region, strand, groom, uniform, error (skinning interpolation), strain (edge strain
-against frame 0 of the result, on a blue-white-red ramp up to +-1 %).
+against frame 0 of the result, on a blue-white-red ramp up to +-1 %), contact (each vertex's Coulomb state
+at the frame's last step, from a simulate folder with contacts: blue sticking, red sliding, grey free).
 
 The camera frames every frame drawn (and the bodies), so a movie does not jump; ``--eye``, ``--target``
 and ``--fov`` override it.  Line width follows the hair's radius at the target's distance, at least one
@@ -31,7 +32,10 @@ from .common import CLIError, _init_taichi
 
 HAIR_COLOR_NAMES = {"brown": (0.36, 0.22, 0.12), "black": (0.06, 0.05, 0.05), "blonde": (0.78, 0.62, 0.38),
                     "red": (0.55, 0.18, 0.07), "grey": (0.6, 0.6, 0.6), "white": (0.9, 0.88, 0.85)}
-RENDER_COLOR_MODES = ("shaded", "region", "strand", "groom", "uniform", "error", "strain")
+RENDER_COLOR_MODES = ("shaded", "region", "strand", "groom", "uniform", "error", "strain", "contact")
+#: --color contact: free, sticking, sliding and unknown (frames before a --resume) vertices [RGB].
+CONTACT_COLORS = np.array([(0.55, 0.55, 0.55), (0.15, 0.45, 1.0), (1.0, 0.3, 0.1), (0.25, 0.25, 0.25)],
+                          np.float32)
 MOVIE_EXTENSIONS = (".mp4", ".gif", ".webm", ".mkv", ".mov")
 #: Refuse to render more images than this in one command (a typo like --frames 0:1000000).
 MAX_IMAGES = 20000
@@ -229,8 +233,11 @@ def cmd_render(args) -> int:
     groom0 = result.groom(frames[0])
     if args.color == "shaded":
         base = hair_color or (result.color if result.color is not None else HAIR_BROWN)
-    elif args.color == "strain":
+    elif args.color in ("strain", "contact"):
         base = None
+        if args.color == "contact" and result.contact_state is None:
+            raise CLIError(f"--color contact: {args.groom} has no contact states (a simulate folder of a run with "
+                           "contacts keeps them in frames.npz)")
     else:
         debug = _colors_for(groom0, args.color)
     images = []
@@ -256,6 +263,8 @@ def cmd_render(args) -> int:
                     colors = shade_strands(points, result.strand_offsets, base, cam.eye)
                 elif args.color == "strain":
                     colors = strain_colors(points, result.positions[0], result.strand_offsets)
+                elif args.color == "contact":
+                    colors = CONTACT_COLORS[np.where(result.contact_state[k] < 0, 3, result.contact_state[k])]
                 else:
                     colors = debug
                 viewer.set_camera(cam)

@@ -114,12 +114,18 @@ class SimulateRun:
         self.frames = np.zeros((self.scene.frames + 1, model.vertex_count, 3),
                                np.float32 if args.precision == "f32" else np.float64)
         self.frames[0] = self.state.positions()
+        # Per frame and vertex: 0 free, 1 sticking, 2 sliding (SolverADMM.vertex_contact_state); -1 unknown
+        # (frames before a --resume: the checkpoint keeps positions only).
+        self.contact_states = np.zeros((self.scene.frames + 1, model.vertex_count), np.int8) \
+            if self.with_contacts else None
         if self.ckpt is not None:
             ckpt = self.ckpt
             self.state.load(ckpt["state"])
             self.solver.restore(ckpt["solver"])
             self.start = min(ckpt["frame"], self.scene.frames)
             self.frames[:self.start + 1] = ckpt["frame_positions"][:self.start + 1]
+            if self.contact_states is not None:
+                self.contact_states[1:self.start + 1] = -1
             self.stats_rows = [r for r in ckpt["stats"] if r["frame"] <= self.start]
         self.completed = self.start
 
@@ -203,6 +209,7 @@ class SimulateRun:
             cs = self.solver.contact_stats
             row.update(contacts=int(cs["contacts"]), sticking=int(cs["sticking"]), sliding=int(cs["sliding"]),
                        max_penetration_m=float(cs["max_penetration_m"]))
+            self.contact_states[f] = self.solver.vertex_contact_state()
         row.update(_frame_quality(model, scene, self.control, x, v, getattr(self.solver, "contact_stats", None)))
         self.frames[f] = x
         return row
@@ -255,7 +262,9 @@ class SimulateRun:
                           strand_vertex_start=model.host["strand_vertex_start"],
                           strand_vertex_count=model.host["strand_vertex_count"],
                           sphere_radius=np.float64(params.get("sphere_radius", params.get("ball_radius", 0.0))),
-                          **_body_arrays(scene, completed))
+                          **_body_arrays(scene, completed),
+                          **({} if self.contact_states is None else
+                             {"vertex_contact_state": self.contact_states[:completed + 1]}))
         else:
             from ..io import save_groom
 

@@ -384,6 +384,25 @@ class ContactPipeline:
 
         contact_statistics(x, self.vertex_radius, self.colliders, self.con, self.stats_out, True)
 
+    def vertex_states(self, vertex_count: int):
+        """Per vertex, the state of its contacts at the step's last ADMM projection (before the correction, as
+        the sticking/sliding counts): 0 free (or separating), 1 sticking, 2 sliding (a vertex with both counts
+        as sliding) [-], int8, shape (vertex_count,).
+
+        A hair-hair contact marks the vertices of both edges that carry weight."""
+        import numpy as np
+
+        out = np.zeros(vertex_count, np.int8)
+        nc = min(self.contact_count, self.con.capacity)
+        if nc <= 0:
+            return out
+        vtx = self.con.contact_vertex.to_numpy()[:nc]
+        w = self.con.contact_weight.to_numpy()[:nc]
+        st = self.con.contact_status_admm.to_numpy()[:nc].astype(np.int8)
+        used = (vtx >= 0) & (w != 0)
+        np.maximum.at(out, vtx[used], np.broadcast_to(st[:, None], vtx.shape)[used])
+        return out
+
     def statistics(self, x) -> dict:
         """Contact count, sticking/sliding/separating counts (last ADMM projection), penetrations [m].
 

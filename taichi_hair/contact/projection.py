@@ -226,7 +226,8 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
     """Counts of the last projection and the penetrations of every contact at the current x.
 
     out = (sticking, sliding, separating, deepest body penetration [m], deepest hair-pair penetration [m],
-    hair pairs crossed [-]); ``con.contact_penetration`` gets each contact's penetration.
+    hair pairs crossed [-]); ``con.contact_penetration`` gets each contact's penetration; ``with_status``
+    also copies each contact's status to ``con.contact_status_admm``.
 
     Hair pair: the signed gap g = n . (p_a - p_b) - (r_a + r_b) at the contact's barycentric points with its
     normal n, which points from b to a at the beginning of the step (or, after the correction's
@@ -246,6 +247,7 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
     for c in range(nc):
         if ti.static(with_status):
             st = con.contact_status[c]
+            con.contact_status_admm[c] = st
             if st == STICK:
                 ti.atomic_add(out[0], 1.0)
             elif st == SLIDE:

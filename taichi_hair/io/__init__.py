@@ -326,6 +326,10 @@ def load_groom(path, format: str | None = None, scale: float | None = None, **op
         accepted = inspect.signature(reader).parameters
         options = {k: v for k, v in options.items() if k in accepted}
     groom = reader(path, **options)
+    if fmt == "data" and scale is None and units_warning(groom) is not None:
+        # USC-HairSalon stores metres, but the format names no unit: a .data file whose size is not hair in
+        # metres keeps unknown units (as CT2Hair's and TressFX's do) instead of a wrong "m" label.
+        groom.units = ""
     if scale is not None:
         if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
             raise ValueError(f"load_groom: scale must be a finite positive number, got {scale!r}")

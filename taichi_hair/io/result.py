@@ -33,6 +33,8 @@ class SimulationResult:
         body_rotation: (F, B, 3, 3) [-] or None; body_translation: (F, B, 3) [m] or None.
         meshes: [(vertices (V, 3) [m, body frame], triangles (T, 3), body index (-1: static world))].
         sphere_radius: the hairball's ball (a sphere of this radius [m] about the origin), 0 when none.
+        contact_state: per frame and vertex 0 free, 1 sticking, 2 sliding, -1 unknown [-], int8, shape (F, N),
+            or None (a run without contacts, or a file output).
         source: the path read.
     """
 
@@ -46,6 +48,7 @@ class SimulationResult:
     body_translation: np.ndarray | None = None
     meshes: list = field(default_factory=list)
     sphere_radius: float = 0.0
+    contact_state: np.ndarray | None = None
     source: str = ""
 
     @property
@@ -104,6 +107,11 @@ def _frames_npz(path: str) -> SimulationResult:
     if not (np.array_equal(start, off[:-1]) and off[-1] == pos.shape[1] and np.all(count >= 2)):
         raise GroomFormatError(path, "the strands do not tile the vertices (strand_vertex_start / _count)")
     extra = _bodies_from(data)
+    if "vertex_contact_state" in data.files:
+        cst = np.asarray(data["vertex_contact_state"])
+        if cst.shape != pos.shape[:2]:
+            raise GroomFormatError(path, f"'vertex_contact_state' must have the shape {pos.shape[:2]}, got {cst.shape}")
+        extra["contact_state"] = cst.astype(np.int8)
     return SimulationResult(positions=pos, strand_offsets=off, fps=float(data["fps"]) if "fps" in data.files else 0.0,
                             sphere_radius=float(data["sphere_radius"]) if "sphere_radius" in data.files else 0.0,
                             source=path, **extra)

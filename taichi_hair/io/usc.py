@@ -1,6 +1,8 @@
 """USC-HairSalon ``.data``: int32 strand count, then per strand int32 n and n float32[3].
 
-Units are metres in the USC head frame (``units = "m"``).  Strands with fewer
+Units are metres in the USC head frame (``units = "m"``); the format does not name them, so
+:func:`taichi_hair.io.load_groom` leaves a file whose size is implausible for hair in metres unlabelled
+(``units = ""``, with the unit warning).  Strands with fewer
 than 2 points (bare scalp samples, n = 0 or 1) are skipped with one warning
 giving their count.  CT2Hair's ``.bin`` has the same layout with 7 floats per
 point (see :mod:`taichi_hair.io.ct2hair`); both share :func:`walk_strands`.
