@@ -515,31 +515,43 @@ class SolverADMM(SolverBase):
         return snap
 
     def restore(self, snapshot: dict) -> None:
-        """Load what :meth:`checkpoint` returned (same Model layout)."""
-        n = self.model.vertex_count
-        for key in SolverBuffers.names(self.buf.warm_start):
+        """Load what :meth:`checkpoint` returned (same Model layout).  Every member is checked for presence
+        and shape before the first ``from_numpy``, so a bad snapshot raises ValueError naming the member and
+        changes nothing."""
+        from .state import field_numpy_shape
+
+        def need(key, field):
+            if key not in snapshot:
+                raise ValueError(f"SolverADMM.restore: the snapshot lacks {key!r}")
             a = np.asarray(snapshot[key])
-            if a.shape != (n, 6):
-                raise ValueError(f"SolverADMM.restore: {key} has shape {a.shape}, expected {(n, 6)}")
-            getattr(self.buf, key).from_numpy(a.astype(getattr(self.buf, key).to_numpy().dtype))
-        self.step_count = int(snapshot["step_count"])
-        self.iteration_count = int(snapshot["iteration_count"])
+            want = field_numpy_shape(field) if field is not None else ()
+            if a.shape != want:
+                raise ValueError(f"SolverADMM.restore: {key} has the shape {a.shape}, expected {want}")
+            return a
+
+        loads = [(getattr(self.buf, key), need(key, getattr(self.buf, key)))
+                 for key in SolverBuffers.names(self.buf.warm_start)]
+        counts = [int(need(key, None)) for key in ("step_count", "iteration_count")]
         # The BDF2 history; a checkpoint without one (older files, backward Euler) restarts it.
         hdt = float(snapshot.get("history_dt", np.nan))
-        self._history_dt = None
         if np.isfinite(hdt):
-            for key in SolverBuffers.names(self.buf.history):
-                field = getattr(self.buf, key)
-                a = np.asarray(snapshot["history_" + key])
-                if a.shape[0] != n:
-                    raise ValueError(f"SolverADMM.restore: history_{key} has {a.shape[0]} rows, expected {n}")
-                field.from_numpy(a.astype(field.to_numpy().dtype))
-            self._history_dt = hdt
+            loads += [(getattr(self.buf, key), need("history_" + key, getattr(self.buf, key)))
+                      for key in SolverBuffers.names(self.buf.history)]
+        colliders = None
         if self.contacts is not None and "collider_has_begin" in snapshot:
             cs = self.contacts.colliders
-            cs.has_begin = bool(snapshot["collider_has_begin"])
-            cs.body_rotation_end.from_numpy(np.asarray(snapshot["collider_rotation_end"]))
-            cs.body_translation_end.from_numpy(np.asarray(snapshot["collider_translation_end"]))
+            colliders = (bool(need("collider_has_begin", None)),
+                         need("collider_rotation_end", cs.body_rotation_end),
+                         need("collider_translation_end", cs.body_translation_end))
+        for field, a in loads:
+            field.from_numpy(a.astype(field.to_numpy().dtype))
+        self.step_count, self.iteration_count = counts
+        self._history_dt = hdt if np.isfinite(hdt) else None
+        if colliders is not None:
+            cs = self.contacts.colliders
+            cs.has_begin = colliders[0]
+            cs.body_rotation_end.from_numpy(colliders[1])
+            cs.body_translation_end.from_numpy(colliders[2])
 
     # ------------------------------------------------------------------ diagnostics
     def energy(self, state: State, control: Control) -> dict:

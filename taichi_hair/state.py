@@ -12,6 +12,14 @@ def _np_float():
     return np.float64 if ti.lang.impl.current_cfg().default_fp == ti.f64 else np.float32
 
 
+def field_numpy_shape(field) -> tuple:
+    """The shape ``field.to_numpy()`` has: the field's shape, then (n,) for a vector or (n, m) for a matrix
+    field."""
+    n, m = getattr(field, "n", None), getattr(field, "m", None)
+    tail = () if n is None else (n,) if m == 1 else (n, m)
+    return tuple(field.shape) + tail
+
+
 class State(VertexStateFields, EdgeStateFields):
     """Positions, velocities, twists and DER frames (fields documented in :mod:`taichi_hair.fields`).
 
@@ -38,6 +46,16 @@ class State(VertexStateFields, EdgeStateFields):
         return {name: getattr(self, name).to_numpy() for name in self.FIELDS}
 
     def load(self, snapshot: dict) -> None:
+        """Load a :meth:`to_numpy` snapshot; every member is checked for presence and shape first (a short
+        array would make ``from_numpy`` read past its end), so a bad snapshot changes nothing."""
+        for name in self.FIELDS:
+            field = getattr(self, name)
+            if name not in snapshot:
+                raise ValueError(f"State.load: the snapshot lacks {name!r}")
+            want = field_numpy_shape(field)
+            got = np.shape(snapshot[name])
+            if got != want:
+                raise ValueError(f"State.load: {name} has the shape {got}, expected {want}")
         for name in self.FIELDS:
             getattr(self, name).from_numpy(snapshot[name])
 

@@ -66,6 +66,12 @@ def main(argv=None) -> int:
     except RuntimeError as exc:  # SimulationDivergedError and Taichi runtime failures
         print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
+    except MemoryError:
+        from ..io.sizing import available_memory, format_bytes
+
+        print(f"error: out of memory ({format_bytes(available_memory())} available now); use fewer strands, "
+              "vertices or frames", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -100,7 +100,8 @@ def _named_scene(args):
                      f"{hs.strands:,} strands", "use fewer --strands or --frames")
     return Scene(name=args.scene, path="", frames=d["frames"], fps=d["fps"], substeps=d["substeps"],
                  gravity=(0.0, -9.81, 0.0), groom=None, solver="admm", solver_config=cfg, colliders=colliders,
-                 bodies=[body], description=desc, model_builder=builder, rest_pose=rest_pose)
+                 bodies=[body], description=desc, model_builder=builder, rest_pose=rest_pose,
+                 vertex_count_hint=hs.vertex_count)
 
 
 #: Options of a groom-file scene (``simulate GROOM_FILE``), with their defaults.
@@ -195,6 +196,12 @@ def cmd_simulate(args) -> int:
     if scene.frames < 1 or scene.substeps < 1 or not scene.fps > 0:
         raise CLIError("--frames and --substeps must be >= 1 and --fps > 0")
     layout = _output_layout(out)
+    n = scene.groom.vertex_count if scene.groom is not None else scene.vertex_count_hint
+    if n:  # a frame buffer too large for memory is streamed to disk: is there room, before anything is built?
+        from ..io.sizing import check_frame_buffer
+
+        check_frame_buffer(n, scene.frames, os.path.dirname(os.path.abspath(layout["stats"])),
+                           8 if args.precision == "f64" else 4)
     if args.frame_format:
         from ..io import WRITERS, normalize_format
 

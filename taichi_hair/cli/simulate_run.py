@@ -37,8 +37,12 @@ class SimulateRun:
         self._resume()
         self._prepare_outputs()
         self._print_header()
-        self._step_frames()
-        self._write_frames()
+        try:
+            self._step_frames()
+            self._write_frames()
+        finally:
+            if self.buffer_files:
+                self._remove_frame_buffers()
         summary = self._summary()
         return self._report(summary)
 
@@ -57,9 +61,12 @@ class SimulateRun:
                 raise CLIError(f"--resume needs the admm solver (this scene uses {scene.solver!r}, which has no "
                                "checkpoints)")
             if os.path.exists(layout["checkpoint"]):
-                from ..scene.checkpoint import fingerprint_difference, read_checkpoint
+                from ..scene.checkpoint import CheckpointError, fingerprint_difference, read_checkpoint
 
-                self.ckpt = read_checkpoint(layout["checkpoint"])
+                try:
+                    self.ckpt = read_checkpoint(layout["checkpoint"])
+                except CheckpointError as exc:
+                    raise CLIError(f"--resume: {exc}") from None
                 diff = fingerprint_difference(self.ckpt["fingerprint"], self.fingerprint)
                 if diff:
                     raise CLIError(f"{layout['checkpoint']}: made for a different scene or settings (differs in "
@@ -110,16 +117,17 @@ class SimulateRun:
         self.t_compile = time.perf_counter() - t
 
     def _resume(self) -> None:
-        model, args = self.model, self.args
-        self.frames = np.zeros((self.scene.frames + 1, model.vertex_count, 3),
-                               np.float32 if args.precision == "f32" else np.float64)
+        args = self.args
+        self._allocate_frame_buffers(np.float32 if args.precision == "f32" else np.float64)
         self.frames[0] = self.state.positions()
-        # Per frame and vertex: 0 free, 1 sticking, 2 sliding (SolverADMM.vertex_contact_state); -1 unknown
-        # (frames before a --resume: the checkpoint keeps positions only).
-        self.contact_states = np.zeros((self.scene.frames + 1, model.vertex_count), np.int8) \
-            if self.with_contacts else None
         if self.ckpt is not None:
+            from ..scene.checkpoint import CheckpointError, check_layout
+
             ckpt = self.ckpt
+            try:
+                check_layout(self.layout["checkpoint"], ckpt, self.state.to_numpy(), self.solver.checkpoint())
+            except CheckpointError as exc:
+                raise CLIError(f"--resume: {exc}") from None
             self.state.load(ckpt["state"])
             self.solver.restore(ckpt["solver"])
             self.start = min(ckpt["frame"], self.scene.frames)
@@ -128,6 +136,47 @@ class SimulateRun:
                 self.contact_states[1:self.start + 1] = -1
             self.stats_rows = [r for r in ckpt["stats"] if r["frame"] <= self.start]
         self.completed = self.start
+
+    def _allocate_frame_buffers(self, dtype) -> None:
+        """The positions of every frame, (F + 1, N, 3), and the contact states, (F + 1, N) int8: 0 free,
+        1 sticking, 2 sliding (SolverADMM.vertex_contact_state), -1 unknown (frames before a --resume: the
+        checkpoint keeps positions only).  In memory, or, when they would take more than a quarter of it
+        (``io.sizing.frames_in_memory``), memory-mapped files ``.frames.buffer*.npy`` in the output folder
+        (its disk space checked first), removed once the frames are written."""
+        from ..io.sizing import check_disk, format_bytes, frame_buffer_bytes, frames_in_memory
+
+        n, nf = self.model.vertex_count, self.scene.frames
+        itemsize = np.dtype(dtype).itemsize
+        shape = (nf + 1, n)
+        self.buffer_files = []
+        if frames_in_memory(n, nf, itemsize):
+            self.frames = np.zeros(shape + (3,), dtype)
+            self.contact_states = np.zeros(shape, np.int8) if self.with_contacts else None
+            return
+        folder = os.path.dirname(os.path.abspath(self.layout["stats"]))
+        os.makedirs(folder, exist_ok=True)
+        size = frame_buffer_bytes(n, nf, itemsize) * (1 + 1 / (3 * itemsize) * self.with_contacts)
+        check_disk(2.0 * size, folder, f"the frame buffer of {nf} frames x {n:,} vertices and the frames written "
+                                       "from it")
+        if not self.args.quiet:
+            print(f"note: the frames ({format_bytes(size)}) exceed a quarter of the available memory; they are "
+                  f"streamed through {folder}/.frames.buffer.npy", file=sys.stderr)
+        path = os.path.join(folder, ".frames.buffer.npy")
+        self.buffer_files.append(path)
+        self.frames = np.lib.format.open_memmap(path, "w+", dtype, shape + (3,))
+        self.contact_states = None
+        if self.with_contacts:
+            path = os.path.join(folder, ".frames.buffer.contacts.npy")
+            self.buffer_files.append(path)
+            self.contact_states = np.lib.format.open_memmap(path, "w+", np.int8, shape)
+
+    def _remove_frame_buffers(self) -> None:
+        self.frames = self.contact_states = None
+        for path in self.buffer_files:
+            try:
+                os.remove(path)
+            except OSError:
+                pass
 
     def _prepare_outputs(self) -> None:
         model, layout, args = self.model, self.layout, self.args

@@ -146,6 +146,8 @@ class Scene:
     rest_pose_check: bool = False
     rest_pose_support: str = "none"
     rest_pose_result: object = None
+    #: Vertices a ``model_builder`` will make (built-in scenes; 0 when unknown), for the size checks.
+    vertex_count_hint: int = 0
 
     @property
     def body_count(self) -> int:
