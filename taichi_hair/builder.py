@@ -268,6 +268,12 @@ class GroomBuilder:
         counts = np.concatenate(self._counts)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         n = int(counts.sum())
+        from .io.sizing import BYTES_PER_VERTEX, check_fits
+
+        # The Model with the State and solver that will follow it (measured per vertex, io/sizing.py), before
+        # any field is allocated.
+        check_fits(float(n) * BYTES_PER_VERTEX, f"GroomBuilder.finalize: a Model of {n:,} vertices",
+                   "use fewer strands or vertices per strand")
         ns = self._strand_count
         mats = self._materials
         strand_of = np.repeat(np.arange(ns), counts)

@@ -223,3 +223,18 @@ def test_memory_error_anywhere_is_one_line(tmp_path, capsys, monkeypatch):
     rc = main(["simulate", "hang", "--strands", "3", "--frames", "1", "--out", str(tmp_path / "m")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and err.startswith("error: out of memory (") and "\n" not in err, err
+
+
+def test_the_builder_refuses_a_model_too_large_for_memory_before_allocating(monkeypatch):
+    """available_memory patched to 10 MB: a 20,000-vertex Model (~24 MB at 1.2 kB per vertex) is refused by
+    finalize() with the estimate, before Taichi allocates a field."""
+    from taichi_hair import GroomBuilder, RodMaterial
+    import taichi_hair.io.sizing as sizing
+
+    monkeypatch.setattr(sizing, "available_memory", lambda: 10e6)
+    b = GroomBuilder()
+    pts = (np.zeros((1000, 20, 3)) + np.linspace(0, -0.1, 20)[None, :, None] * [0, 1, 0]).reshape(-1, 3)
+    pts[:, 0] += np.repeat(np.arange(1000) * 1e-3, 20)
+    b.add_strands(pts, np.arange(0, 20001, 20), RodMaterial())
+    with pytest.raises(ValueError, match=r"GroomBuilder.finalize: a Model of 20,000 vertices needs an estimated 24"):
+        b.finalize()
