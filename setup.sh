@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set-up on a fresh machine: system packages (Mesa's software Vulkan device, used by the GPU-path
 # tests and off-screen GGUI rendering; Xvfb and xdotool for the window test; g++ builds mesh2sdf from source), then the package with its
-# test and benchmark extras.
+# test, benchmark and batch (Dask distributed) extras.
 set -euo pipefail
 cd "$(dirname "$0")"
 if command -v apt-get >/dev/null 2>&1; then
@@ -16,4 +16,4 @@ if command -v apt-get >/dev/null 2>&1; then
   fi
 fi
 export PIP_DISABLE_PIP_VERSION_CHECK=1
-python3 -m pip install -q -e ".[test,bench]"
+python3 -m pip install -q -e ".[test,bench,batch]"

@@ -122,6 +122,10 @@ def _load_scene(args):
         where = ("set [groom] units / up and a [[colliders]] mesh in the scene file" if args.scene.endswith(".toml")
                  else "the built-in scenes make their own groom and body")
         raise CLIError(f"--{given[0].replace('_', '-')} applies to a groom file (simulate GROOM_FILE); {where}")
+    if args.set and (args.scene in SCENES or groom_file):
+        raise CLIError(f"--set {args.set[0]}: --set changes a scene file's keys; {args.scene!r} is "
+                       + ("a built-in scene (use a scene file, e.g. assets/scenes/hairball.toml)" if args.scene in SCENES else
+                          "a groom file"))
     if args.scene in SCENES:
         return _named_scene(args)
     over = dict(frames=args.frames, fps=args.fps, substeps=args.substeps, strands=args.strands,
@@ -138,9 +142,10 @@ def _load_scene(args):
                        "groom file)")
     if not os.path.isfile(args.scene):
         raise CLIError(f"{args.scene}: no such scene file")
-    from ..scene.file import load_scene
+    from ..scene.file import load_scene, parse_set
 
-    return load_scene(args.scene, over)
+    sets = dict(parse_set(t) for t in args.set)
+    return load_scene(args.scene, over, sets)
 
 
 # --------------------------------------------------------------------------- output
@@ -312,6 +317,9 @@ def register(sub) -> None:
     s.add_argument("--continuous", type=int, default=None, metavar="N",
                    help="ADMM contacts: continuous-time collision detections per substep (paper's CT runs: 3; "
                         "0: proximity only)")
+    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a scene file's key by its dotted name, e.g. --set solver.contacts.friction=0.3 or "
+                        "--set colliders.0.friction=0.5 (VALUE read as TOML; repeatable)")
     s.add_argument("--checkpoint-every", type=int, default=10, metavar="K",
                    help="write a checkpoint every K frames and at the end (ADMM solver; 0: never; default 10)")
     s.add_argument("--resume", action="store_true",

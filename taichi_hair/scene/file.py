@@ -262,7 +262,51 @@ def read_toml(path: str, what: str) -> dict:
         raise SceneError(f"{path}: not valid TOML ({exc})") from None
 
 
-def load_scene(path, overrides: dict | None = None) -> Scene:
+def parse_set(text: str, what: str = "--set") -> tuple:
+    """``KEY=VALUE`` of ``--set`` -> (KEY, value): VALUE is read as a TOML value (``0.3``, ``true``,
+    ``"mesh.obj"``, ``[0, 1, 0]``); anything TOML cannot read is kept as a string."""
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise SceneError(f"{what} {text!r}: expected KEY=VALUE, e.g. solver.contacts.friction=0.3")
+    try:
+        return key, tomllib.loads("v = " + value.strip())["v"]
+    except tomllib.TOMLDecodeError:
+        return key, value.strip()
+
+
+def apply_sets(data: dict, sets: dict, path: str) -> dict:
+    """A copy of a scene file's tables with dotted keys set: ``solver.contacts.friction`` ->
+    ``data["solver"]["contacts"]["friction"]``; an integer part indexes an array of tables
+    (``colliders.0.friction``).  Unknown keys are then refused by the scene's own validation; a path through
+    something that is not a table is refused here, naming the key."""
+    import copy
+
+    out = copy.deepcopy(data)
+    for key, value in sets.items():
+        parts = key.split(".")
+        node = out
+        for i, part in enumerate(parts[:-1]):
+            where = ".".join(parts[:i + 1])
+            if isinstance(node, list):
+                if not part.isdigit() or int(part) >= len(node):
+                    raise SceneError(f"{path}: set {key}: {'.'.join(parts[:i])} has {len(node)} entries, "
+                                     f"{part!r} is not one of them")
+                node = node[int(part)]
+            elif isinstance(node, dict):
+                node = node.setdefault(part, {})
+            else:
+                raise SceneError(f"{path}: set {key}: {where} is not a table")
+            if not isinstance(node, (dict, list)):
+                raise SceneError(f"{path}: set {key}: {where} is a value, not a table")
+        if isinstance(node, list):
+            raise SceneError(f"{path}: set {key}: {'.'.join(parts[:-1])} is an array of tables; name an entry "
+                             f"({'.'.join(parts[:-1])}.0.{parts[-1]})")
+        node[parts[-1]] = value
+    return out
+
+
+def load_scene(path, overrides: dict | None = None, sets: dict | None = None) -> Scene:
     """Read and validate a TOML scene file.
 
     Args:
@@ -271,6 +315,8 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
             ``strands`` (generator count, or the strands kept from a file), ``length``, ``seed`` and
             ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``integrator`` (admm), ``continuous`` (admm
             contact detections), ``rest_pose`` ([groom] rest_pose).
+        sets: any scene-file key by its dotted name (``{"solver.contacts.friction": 0.3}``;
+            :func:`apply_sets`), applied to the file's tables before validation (``simulate --set``, batches).
 
     Raises:
         SceneError: naming the file, the table and the key.
@@ -278,6 +324,8 @@ def load_scene(path, overrides: dict | None = None) -> Scene:
     path = os.fspath(path)
     overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
     data = read_toml(path, "the scene")
+    if sets:
+        data = apply_sets(data, sets, path)
     return scene_from_data(data, path, os.path.dirname(os.path.abspath(path)), overrides)
 
 

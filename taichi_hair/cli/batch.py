@@ -1,0 +1,290 @@
+"""``taichi-hair batch SPEC.toml --out DIR``: many ``simulate`` runs on Dask distributed.
+
+    taichi-hair batch assets/batches/hang_variants.toml --out out/batch --workers 2
+    taichi-hair batch spec.toml --out /shared/out --scheduler tcp://10.0.0.5:8786   # an existing cluster
+
+The spec (:mod:`taichi_hair.scene.batch`) names a base scene and runs.  Each run is one Dask task that runs
+``simulate`` in a worker process exactly as ``taichi-hair simulate SCENE ... --out DIR/<name>`` would (the
+same arguments, so the same frames, bit for bit: tested), with stdout and stderr kept in
+``DIR/<name>/batch.log``.  Without ``--scheduler`` a ``LocalCluster`` of ``--workers`` processes with one
+thread each runs them; each run initialises Taichi in its worker process (``ti.init`` resets the runtime, so
+a run starts clean and the previous run's fields are freed) and its kernels come from Taichi's offline cache,
+which the workers of one machine share (``TI_OFFLINE_CACHE_FILE_PATH``, default ``~/.cache/taichi``).
+
+A failed run (a bad parameter, a divergence, a worker killed) is recorded by name with its one-line error and
+the others go on; the command then exits 1 and names the failed runs.  ``DIR/batch.csv`` and
+``DIR/batch.json`` gather every run's status, wall time, ms per frame and quality figures.  Running the same
+command again skips the runs that finished (``DIR/<name>/batch_done.json`` records their arguments; a run
+whose arguments changed runs again) and resumes unfinished ones from their checkpoints (a worker that dies is
+replaced by Dask and its task retried, resuming the same way).
+
+Dask is the only part of the project that needs ``distributed`` (``pip install -e .[batch]``, which
+``setup.sh`` does); the library never imports it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+import time
+
+from .common import CLIError
+
+#: Columns of batch.csv (and keys of each run in batch.json).
+COLUMNS = ("name", "status", "exit_code", "resumed_from_frame", "task_seconds", "wall_seconds", "ms_per_frame",
+           "frames", "strands", "vertices", "strain_p50_max", "strain_p99_max", "strain_max", "body_penetration_max_m",
+           "vertices_inside_max", "hair_penetration_max_m", "came_to_rest", "diverged", "error", "command")
+DONE_FILE = "batch_done.json"
+LOG_FILE = "batch.log"
+
+
+# --------------------------------------------------------------------------- runs -> simulate arguments
+def simulate_parser() -> argparse.ArgumentParser:
+    """A parser of ``simulate`` alone (the same options as ``taichi-hair simulate``)."""
+    from .simulate import register
+
+    p = argparse.ArgumentParser(prog="taichi-hair", exit_on_error=False)
+    sub = p.add_subparsers(dest="command", required=True)
+    register(sub)
+    return p
+
+
+def _simulate_actions() -> dict:
+    sp = simulate_parser()._subparsers._group_actions[0].choices["simulate"]
+    return {a.dest: a for a in sp._actions if a.option_strings}
+
+
+def _literal(v) -> str:
+    """A TOML literal of a spec value (numbers, booleans, strings, lists of them)."""
+    return json.dumps(v)
+
+
+def run_argv(run, out_dir: str, actions: dict) -> list:
+    """``simulate`` arguments of one :class:`~taichi_hair.scene.batch.BatchRun` (without ``--resume``,
+    which the task adds when a checkpoint is there)."""
+    argv = ["simulate", run.scene]
+    for dest, value in run.options.items():
+        action = actions[dest]
+        flag = max(action.option_strings, key=len)
+        if isinstance(action, argparse._StoreTrueAction):
+            if not isinstance(value, bool):
+                raise CLIError(f"run {run.name}: {flag} is a switch: give true or false, got {value!r}")
+            if value:
+                argv.append(flag)
+        elif isinstance(action, argparse._AppendAction) or action.nargs not in (None, "?"):
+            values = value if isinstance(value, list) else [value]
+            argv += [flag] + [str(v) for v in values]
+        else:
+            argv += [flag, str(value)]
+    for key, value in run.sets.items():
+        argv += ["--set", f"{key}={_literal(value)}"]
+    return argv + ["--out", os.path.join(out_dir, run.name), "--quiet"]
+
+
+# --------------------------------------------------------------------------- the task (in a worker)
+def run_task(name: str, argv: list) -> dict:
+    """One run in a worker process: ``simulate`` with its output redirected to ``DIR/<name>/batch.log``;
+    ``--resume`` when the run's checkpoint exists (a rerun, or Dask's retry after a worker died)."""
+    import contextlib
+    import io
+
+    out = argv[argv.index("--out") + 1]
+    resumable = os.path.exists(os.path.join(out, "checkpoint.npz"))
+    full = argv + (["--resume"] if resumable else [])
+    buf = io.StringIO()
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+        try:
+            args = simulate_parser().parse_args(full)
+        except (argparse.ArgumentError, SystemExit) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            rc = 2
+        else:
+            from .common import run_guarded
+
+            try:
+                rc = run_guarded(args.func, args)
+            except Exception as exc:  # noqa: BLE001 - one run's bug must not stop the batch; recorded by name
+                print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+                rc = 1
+    wall = time.perf_counter() - t0
+    log = buf.getvalue()
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, LOG_FILE), "a") as fh:
+        fh.write(f"$ taichi-hair {' '.join(full)}\n{log}\n")
+    errors = [ln for ln in log.splitlines() if ln.startswith("error:")]
+    error = errors[-1][len("error:"):].strip() if errors else ("" if rc == 0 else (log.strip().splitlines() or
+                                                                                  [f"exit {rc}"])[-1])
+    if rc == 0:
+        with open(os.path.join(out, DONE_FILE), "w") as fh:
+            json.dump({"argv": argv}, fh)
+    return {"name": name, "exit_code": int(rc), "task_wall_seconds": wall, "error": error, "resumed": resumable}
+
+
+# --------------------------------------------------------------------------- the driver
+def _finished(out: str, argv: list) -> bool:
+    try:
+        with open(os.path.join(out, DONE_FILE)) as fh:
+            return json.load(fh).get("argv") == argv
+    except (OSError, ValueError):
+        return False
+
+
+def _row(name: str, out: str, argv: list, status: str, result: dict | None) -> dict:
+    row = dict.fromkeys(COLUMNS, "")
+    row.update(name=name, status=status, command="taichi-hair " + " ".join(argv))
+    try:
+        with open(os.path.join(out, "summary.json")) as fh:
+            s = json.load(fh)
+    except (OSError, ValueError):
+        s = None
+    if s is not None:
+        q = s.get("quality", {}) or {}
+        row.update(resumed_from_frame=s.get("resumed_from_frame"), wall_seconds=s.get("wall_seconds"),
+                   ms_per_frame=s.get("ms_per_frame"), frames=s.get("frames"), strands=s.get("strands"),
+                   vertices=s.get("vertices"), diverged=s.get("diverged"))
+        for k in ("strain_p50_max", "strain_p99_max", "strain_max", "body_penetration_max_m",
+                  "vertices_inside_max", "came_to_rest"):
+            row[k] = q.get(k)
+        row["hair_penetration_max_m"] = q.get("hair_penetration_max_m_max")
+    if result is not None:
+        row.update(exit_code=result.get("exit_code"), error=result.get("error", ""),
+                   task_seconds=result.get("task_wall_seconds", ""))
+    elif status == "done":
+        row["exit_code"] = 0
+    return row
+
+
+def _client(args):
+    import logging
+
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise CLIError("batch needs Dask distributed: pip install 'taichi-hair[batch]' (setup.sh installs it)") \
+            from None
+    import dask
+
+    # A killed worker is replaced by its nanny and the task retried (resuming from the run's checkpoint);
+    # after this many deaths the run is recorded as failed.
+    dask.config.set({"distributed.scheduler.allowed-failures": 2})
+    if args.scheduler:
+        try:
+            client = Client(args.scheduler, timeout=30)
+            client.has_dashboard = True  # the cluster's own, when it runs one
+            return client, None
+        except (OSError, TimeoutError) as exc:
+            raise CLIError(f"--scheduler {args.scheduler}: cannot connect ({exc})") from None
+    try:
+        import bokeh  # noqa: F401 - the dashboard needs it
+        dashboard = ":0"
+    except ImportError:
+        dashboard = None
+    cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                           dashboard_address=dashboard, silence_logs=logging.ERROR)
+    client = Client(cluster)
+    client.has_dashboard = dashboard is not None
+    return client, cluster
+
+
+def cmd_batch(args) -> int:
+    from ..progress import Progress
+    from ..scene.batch import read_batch
+    from ..scene.file import SceneError
+
+    if not os.path.isfile(args.spec):
+        raise CLIError(f"{args.spec}: no such batch file")
+    if args.workers < 1 or args.workers > 256:
+        raise CLIError(f"--workers must be in [1, 256], got {args.workers}")
+    actions = _simulate_actions()
+    try:
+        runs = read_batch(args.spec, actions)
+    except SceneError as exc:
+        raise CLIError(str(exc)) from None
+    out = args.out
+    os.makedirs(out, exist_ok=True)
+    argvs = {r.name: run_argv(r, out, actions) for r in runs}
+    todo = [r.name for r in runs if not _finished(os.path.join(out, r.name), argvs[r.name])]
+    skipped = len(runs) - len(todo)
+    print(f"batch {args.spec}: {len(runs)} runs, {skipped} finished earlier, {len(todo)} to run", flush=True)
+    results = {}
+    t0 = time.perf_counter()
+    if todo:
+        from distributed import as_completed
+
+        client, cluster = _client(args)
+        try:
+            if client.has_dashboard and client.dashboard_link and not args.quiet:
+                print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+            futures = {client.submit(run_task, name, argvs[name], key=f"run-{name}-{time.time_ns()}", pure=False):
+                       name for name in todo}
+            bar = Progress(len(todo), label="runs", enabled=not args.quiet)
+            failed = 0
+            for k, fut in enumerate(as_completed(futures), 1):
+                name = futures[fut]
+                try:
+                    results[name] = fut.result()
+                except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: recorded by name
+                    msg = " ".join(str(exc).split()) or type(exc).__name__
+                    results[name] = {"name": name, "exit_code": -1, "error": f"{type(exc).__name__}: {msg}"[:300]}
+                failed += results[name]["exit_code"] != 0
+                bar.update(k, failed=failed)
+            bar.close()
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    wall = time.perf_counter() - t0
+    rows = []
+    for r in runs:
+        d = os.path.join(out, r.name)
+        if r.name in results:
+            res = results[r.name]
+            status = "done" if res["exit_code"] == 0 else "failed"
+            rows.append(_row(r.name, d, argvs[r.name], status, res))
+        else:
+            rows.append(_row(r.name, d, argvs[r.name], "done", None))
+            rows[-1]["status"] = "done earlier"
+    _write_tables(out, rows, args, wall)
+    failed = [row["name"] for row in rows if row["status"] == "failed"]
+    print(f"wrote {os.path.join(out, 'batch.csv')} and batch.json: {len(rows) - len(failed)} of {len(rows)} runs "
+          f"done ({skipped} earlier), {wall:.1f} s")
+    if failed:
+        for row in rows:
+            if row["status"] == "failed":
+                print(f"failed: {row['name']}: {row['error']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _write_tables(out: str, rows: list, args, wall: float) -> None:
+    tmp = os.path.join(out, "batch.csv.tmp")
+    with open(tmp, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS)
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, os.path.join(out, "batch.csv"))
+    meta = {"spec": os.path.abspath(args.spec), "workers": args.workers, "scheduler": args.scheduler,
+            "wall_seconds": wall, "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "runs": rows}
+    tmp = os.path.join(out, "batch.json.tmp")
+    with open(tmp, "w") as fh:
+        json.dump(meta, fh, indent=1, default=str)
+    os.replace(tmp, os.path.join(out, "batch.json"))
+
+
+def register(sub) -> None:
+    b = sub.add_parser("batch", help="many simulate runs (named runs and sweeps of a base scene) on Dask",
+                       description="Run the [[runs]] and [sweep] of a batch file (taichi_hair/scene/batch.py), each "
+                                   "exactly as simulate --out DIR/<name> would, on a Dask LocalCluster or an "
+                                   "existing cluster; DIR/batch.csv and batch.json gather the runs' figures.")
+    b.add_argument("spec", help="the batch file (.toml)")
+    b.add_argument("--out", required=True, help="output folder: one folder per run, batch.csv, batch.json")
+    b.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) // 2),
+                   help="LocalCluster worker processes, one thread each (default: half the CPUs)")
+    b.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster (tcp://host:8786) instead of a LocalCluster")
+    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    b.set_defaults(func=cmd_batch)
