@@ -48,11 +48,23 @@ def parallel_transport(u: vec3, t0: vec3, t1: vec3) -> vec3:
     """Rotate u by the minimal rotation taking unit t0 to unit t1.
 
     Rodrigues' formula with the unnormalised axis b = t0 x t1:
-    R u = c u + b x u + (b.u) b / (1 + c), c = t0.t1 (valid for c > -1).
+    R u = c u + b x u + (b.u) b / (1 + c), c = t0.t1 (valid for c > -1).  A tangent that reversed
+    (c <= -1 + 1e-6: an edge flipped in one step, e.g. by a body projection) has no minimal rotation; it
+    is then the half turn about the axis a = u's part across t0 (R u = 2 (a.u) a - u = u for a director
+    u across t0), instead of the formula's 0 / 0 = NaN.
     """
     b = t0.cross(t1)
     c = t0.dot(t1)
-    return c * u + b.cross(u) + (b.dot(u) / (1.0 + c)) * b
+    out = u
+    if c > -1.0 + 1e-6:
+        out = c * u + b.cross(u) + (b.dot(u) / (1.0 + c)) * b
+    else:
+        a = u - u.dot(t0) * t0
+        if a.norm() < 1e-12:  # u along t0: any axis across t0
+            a = t0.cross(vec3(1.0, 0.0, 0.0)) if ti.abs(t0[0]) < 0.9 else t0.cross(vec3(0.0, 1.0, 0.0))
+        a = a.normalized()
+        out = 2.0 * a.dot(u) * a - u
+    return out
 
 
 @ti.func

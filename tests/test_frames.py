@@ -57,6 +57,31 @@ def test_parallel_transport_invariants():
     np.testing.assert_allclose(out.to_numpy(), pb, atol=2e-6)
 
 
+def test_parallel_transport_of_a_reversed_tangent_is_a_finite_half_turn():
+    """t1 = -t0 (an edge flipped in one step) has no minimal rotation; the transport is the half turn about
+    u's part across t0: a director u across t0 maps to itself, t0 maps to -t0, and nothing is NaN (before,
+    Rodrigues' formula gave 0 / 0).  Tolerance 1e-6 (f32)."""
+    t0 = np.array([[0.0, 1.0, 0.0], [0.6, 0.0, 0.8], [0.0, 0.0, 1.0]], np.float32)
+    u = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], np.float32)  # the last one along t0
+    fa, fu = ti.Vector.field(3, ti.f32, 3), ti.Vector.field(3, ti.f32, 3)
+    out, out_t = ti.Vector.field(3, ti.f32, 3), ti.Vector.field(3, ti.f32, 3)
+    fa.from_numpy(t0)
+    fu.from_numpy(u)
+
+    @ti.kernel
+    def run():
+        for i in range(3):
+            out[i] = parallel_transport(fu[i], fa[i], -fa[i])
+            out_t[i] = parallel_transport(fa[i], fa[i], -fa[i])
+
+    run()
+    pu, pt = out.to_numpy(), out_t.to_numpy()
+    assert np.all(np.isfinite(pu)) and np.all(np.isfinite(pt))
+    np.testing.assert_allclose(pt, -t0, atol=1e-6)
+    np.testing.assert_allclose(pu[:2], u[:2], atol=1e-6)
+    np.testing.assert_allclose(pu[2], -u[2], atol=1e-6)  # u along t0 turns with it
+
+
 def test_rest_frames_of_a_helix_are_orthonormal_and_twist_free():
     s = np.linspace(0, 4 * np.pi, 80)
     pts = np.c_[0.005 * np.cos(s), 0.005 * np.sin(s), 0.002 * s]
