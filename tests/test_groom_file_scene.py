@@ -164,3 +164,35 @@ def test_simulate_a_groom_file_on_its_nodding_body_writes_the_posed_body(files, 
     assert data["collider_0_faces"].shape[1] == 3 and int(data["collider_0_body"]) == 0
     q = json.loads((out / "summary.json").read_text())["quality"]
     assert q["strain_p99_max"] < 0.01 and q["vertices_inside_max"] == 0, q
+
+
+def test_a_usd_body_is_read_in_world_space_with_its_stage_units_and_up_axis(tmp_path):
+    """A cube of 2 units (6 quads, fanned into 12 triangles) under an Xform translated by 10 units along z,
+    in a stage with metersPerUnit 0.01 and upAxis Z: read in metres and y-up, (x, y, z) -> (x, z, -y), it
+    spans x, z in [-0.01, 0.01] and y in [0.09, 0.11], closed (watertight); the stage's units win over the
+    scale passed (the groom's)."""
+    pytest.importorskip("pxr")
+    from pxr import Gf, Usd, UsdGeom
+
+    from taichi_hair.scene.setup import load_body_mesh
+
+    path = str(tmp_path / "cube.usda")
+    st = Usd.Stage.CreateNew(path)
+    UsdGeom.SetStageMetersPerUnit(st, 0.01)
+    UsdGeom.SetStageUpAxis(st, UsdGeom.Tokens.z)
+    x = UsdGeom.Xform.Define(st, "/World")
+    x.AddTranslateOp().Set(Gf.Vec3d(0, 0, 10))
+    m = UsdGeom.Mesh.Define(st, "/World/cube")
+    corners = [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1), (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)]
+    m.GetPointsAttr().Set([Gf.Vec3f(*map(float, c)) for c in corners])
+    quads = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    m.GetFaceVertexCountsAttr().Set([4] * 6)
+    m.GetFaceVertexIndicesAttr().Set([i for q in quads for i in q])
+    st.Save()
+    mesh = load_body_mesh(path, scale=1.0, up="y")
+    assert len(mesh.faces) == 12 and mesh.is_watertight
+    np.testing.assert_allclose(mesh.bounds, [[-0.01, 0.09, -0.01], [0.01, 0.11, 0.01]], atol=1e-9)
+    with pytest.raises(ValueError, match="no UsdGeom.Mesh"):
+        empty = str(tmp_path / "empty.usda")
+        Usd.Stage.CreateNew(empty).Save()
+        load_body_mesh(empty)

@@ -282,7 +282,8 @@ def register(sub) -> None:
                    help="the file's up axis: z-up files are turned to the simulator's y-up (default y)")
     g.add_argument("--body", default=None, metavar="MESH",
                    help="a body mesh the hair collides with and whose roots follow it: OBJ, PLY, STL, OFF, "
-                        "glTF or TressFX .tfxmesh, in the groom's units and up axis unless --body-units")
+                        "glTF, TressFX .tfxmesh or USD, in the groom's units and up axis unless --body-units (a USD "
+                        "stage's own metersPerUnit and upAxis win)")
     g.add_argument("--body-units", choices=("m", "cm", "mm", "in"), default=None,
                    help="the body mesh's length unit when it differs from the groom's")
     g.add_argument("--animation", default=None, metavar="still|nod|turn|KEYS.toml",

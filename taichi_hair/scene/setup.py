@@ -20,7 +20,7 @@ UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 #: The up axis of a file: "y" (the simulator's: gravity along -y) or "z" (turned by (x, y, z) -> (x, z, -y)).
 UP_AXES = ("y", "z")
 #: Body meshes: trimesh's formats and TressFX's collision mesh.
-MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".tfxmesh")
+MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".tfxmesh", ".usd", ".usda", ".usdc")
 
 
 def load_body_mesh(path: str, scale: float = 1.0, up: str = "y"):
@@ -38,6 +38,11 @@ def load_body_mesh(path: str, scale: float = 1.0, up: str = "y"):
         tm = read_tfxmesh(path)
         mesh = trimesh.Trimesh(vertices=np.asarray(tm.vertices, np.float64),
                                faces=np.asarray(tm.triangles, np.int64), process=False)
+    elif path.lower().endswith((".usd", ".usda", ".usdc")):
+        vertices, faces, stage_scale, stage_up = usd_mesh(path)
+        scale = stage_scale if stage_scale is not None else scale
+        up = stage_up if stage_up is not None else up
+        mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
     else:
         try:
             mesh = trimesh.load(path, force="mesh")
@@ -49,6 +54,58 @@ def load_body_mesh(path: str, scale: float = 1.0, up: str = "y"):
     if up == "z":
         v = np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1)
     return trimesh.Trimesh(vertices=v, faces=np.asarray(mesh.faces), process=False)
+
+
+def usd_mesh(path: str):
+    """(vertices (V, 3) in the stage's units, triangles (T, 3), metres per unit or None, up axis or None) of
+    every ``UsdGeom.Mesh`` of a USD file at its default time, each in world space (its prim's local-to-world
+    transform), polygons fanned into triangles.  The stage's authored ``metersPerUnit`` and ``upAxis``, when
+    it has them, win over the caller's units and up axis: a USD file says what its units are.
+
+    Raises:
+        ValueError: naming the file (usd-core missing, unreadable, no mesh).
+    """
+    from ..io.usd import _pxr
+
+    try:
+        _, _, Usd, UsdGeom, _ = _pxr()
+    except ImportError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    try:
+        stage = Usd.Stage.Open(path)
+    except Exception as exc:  # noqa: BLE001 - pxr raises Tf.ErrorException and others
+        raise ValueError(f"{path}: cannot open the USD file ({' '.join(str(exc).split())[:200]})") from None
+    if stage is None:
+        raise ValueError(f"{path}: cannot open the USD file")
+    verts, faces, offset = [], [], 0
+    t = Usd.TimeCode.Default()
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdGeom.Mesh):
+            continue
+        m = UsdGeom.Mesh(prim)
+        pts = np.asarray(m.GetPointsAttr().Get(t) or [], np.float64).reshape(-1, 3)
+        counts = np.asarray(m.GetFaceVertexCountsAttr().Get(t) or [], np.int64)
+        idx = np.asarray(m.GetFaceVertexIndicesAttr().Get(t) or [], np.int64)
+        if not len(pts) or not len(counts) or counts.sum() != len(idx) or np.any(counts < 3) or \
+                (len(idx) and (idx.min() < 0 or idx.max() >= len(pts))):
+            raise ValueError(f"{path}: mesh {prim.GetPath()} has inconsistent faces (counts, indices, points)")
+        M = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(t), np.float64)  # row vectors
+        world = pts @ M[:3, :3] + M[3, :3]
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        tri = [np.stack([idx[starts + 0], idx[starts + k], idx[starts + k + 1]], axis=1)[counts > k + 1]
+               for k in range(1, int(counts.max()) - 1)]
+        verts.append(world)
+        faces.append(np.concatenate(tri) + offset)
+        offset += len(world)
+    if not verts:
+        raise ValueError(f"{path}: no UsdGeom.Mesh in the file")
+    scale = float(UsdGeom.GetStageMetersPerUnit(stage)) if UsdGeom.StageHasAuthoredMetersPerUnit(stage) else None
+    up = None
+    if stage.HasAuthoredMetadata("upAxis"):
+        up = str(UsdGeom.GetStageUpAxis(stage)).lower()
+        if up not in UP_AXES:
+            raise ValueError(f"{path}: upAxis {up!r} (known: Y, Z)")
+    return np.concatenate(verts), np.concatenate(faces), scale, up
 
 
 def resolve_path(base_dir: str, p: str) -> str:
