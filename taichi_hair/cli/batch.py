@@ -18,6 +18,9 @@ command again skips the runs that finished (``DIR/<name>/batch_done.json`` recor
 whose arguments changed runs again) and resumes unfinished ones from their checkpoints (a worker that dies is
 replaced by Dask and its task retried, resuming the same way).
 
+With ``--scheduler`` the workers must see ``DIR`` (and a scene file) at the same absolute paths (shared
+storage) and run the same environment (taichi-hair installed: the scheduler unpickles the task's function).
+
 Dask is the only part of the project that needs ``distributed`` (``pip install -e .[batch]``, which
 ``setup.sh`` does); the library never imports it.
 """
@@ -204,7 +207,7 @@ def cmd_batch(args) -> int:
         runs = read_batch(args.spec, actions)
     except SceneError as exc:
         raise CLIError(str(exc)) from None
-    out = args.out
+    out = os.path.abspath(args.out)  # the workers' working folders may differ (a cluster: shared storage)
     os.makedirs(out, exist_ok=True)
     argvs = {r.name: run_argv(r, out, actions) for r in runs}
     todo = [r.name for r in runs if not _finished(os.path.join(out, r.name), argvs[r.name])]
