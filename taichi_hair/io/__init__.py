@@ -32,14 +32,16 @@ from __future__ import annotations
 
 import inspect
 import math
+import mmap
 import os
 import warnings
 import zipfile
 
 import numpy as np
 
-from .errors import GroomFormatError
-from .groom import Groom
+from ._util import file_size
+from .errors import GroomFileNotFoundError, GroomFormatError
+from .groom import LENGTH_CHUNK_VERTICES, Groom, strand_lengths
 from .hair import read_hair, write_hair
 from .usc import read_usc, write_usc
 from .ct2hair import read_ct2hair
@@ -62,8 +64,8 @@ FORMAT_NAMES = tuple(READERS) + ("tfxmesh",)
 # Plausible median strand length for hair in metres.
 PLAUSIBLE_LENGTH_M = (1e-3, 5.0)
 
-__all__ = ["Groom", "GroomFormatError", "UnitsWarning", "TfxMesh", "load_groom", "save_groom", "detect_format", "read_tfxmesh",
-           "FORMAT_NAMES", "READERS", "WRITERS"]
+__all__ = ["Groom", "GroomFormatError", "GroomFileNotFoundError", "UnitsWarning", "TfxMesh", "load_groom",
+           "save_groom", "detect_format", "read_tfxmesh", "FORMAT_NAMES", "READERS", "WRITERS"]
 
 
 def normalize_format(name: str) -> str:
@@ -88,20 +90,26 @@ def _fits_strand_walk(data: bytes, floats_per_point: int) -> bool:
     size = len(data)
     if size < 4 or size % 4:
         return False
-    words = memoryview(data).cast("i") if np.little_endian else np.frombuffer(data, "<i4").tolist()
-    ns, nw, h = words[0], len(words), 1
-    if ns <= 0 or ns > nw - 1:
-        return False
-    for _ in range(ns):
-        if h >= nw:
+    view = memoryview(data)
+    words = view.cast("i") if np.little_endian else np.frombuffer(data, "<i4").tolist()
+    try:
+        ns, nw, h = words[0], len(words), 1
+        if ns <= 0 or ns > nw - 1:
             return False
-        n = words[h]
-        if n < 0:
-            return False
-        h += 1 + n * floats_per_point
-        if h > nw:
-            return False
-    return h == nw
+        for _ in range(ns):
+            if h >= nw:
+                return False
+            n = words[h]
+            if n < 0:
+                return False
+            h += 1 + n * floats_per_point
+            if h > nw:
+                return False
+        return h == nw
+    finally:
+        if np.little_endian:
+            words.release()
+        view.release()  # a memory map cannot close while a view of it is alive
 
 
 def detect_format(path) -> str:
@@ -111,11 +119,14 @@ def detect_format(path) -> str:
     OSError if it cannot be read.
     """
     by_ext = format_from_extension(path)
-    size = os.path.getsize(path)
+    size = file_size(path)
     if size == 0:
         raise GroomFormatError(path, "the file is empty")
-    with open(path, "rb") as fh:
-        head = fh.read(1 << 16)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError as exc:
+        raise GroomFormatError(path, f"cannot read the file ({exc.strerror or exc})") from None
     if head[:4] == b"HAIR":
         return "hair"
     if head.startswith(b"ply\n") or head.startswith(b"ply\r\n"):
@@ -150,9 +161,10 @@ def detect_format(path) -> str:
             and any(ln.startswith(b"v ") for ln in lines):
         return "obj"
     if size % 4 == 0:
-        with open(path, "rb") as fh:
-            data = fh.read()
-        fits = [f for f, k in (("data", 3), ("ct2hair", 7)) if _fits_strand_walk(data, k)]
+        # A memory map: the walk touches the strand headers only, and the reader's one read of the whole file
+        # comes after (from the page cache).
+        with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            fits = [f for f, k in (("data", 3), ("ct2hair", 7)) if _fits_strand_walk(data, k)]
         if len(fits) == 1:
             return fits[0]
         if fits:
@@ -176,22 +188,34 @@ class UnitsWarning(UserWarning):
     """A groom's size suggests it is not in metres (the message gives the likely unit and factor)."""
 
 
+#: Strands sampled for the median length of a large groom, and the most vertices the sample may copy.
+SIZE_SAMPLE_STRANDS, SIZE_SAMPLE_VERTICES = 4096, 1 << 20
+
+
 def groom_size(groom: Groom) -> tuple:
     """(median strand length, extent of the roots or None with fewer than 16 strands), in the groom's units.
 
-    The root extent is the diagonal of the bounding box of the strands' first points."""
-    if groom.strand_count > 4096:  # a median over an even sample of strands is plenty for a warning
-        pick = np.linspace(0, groom.strand_count - 1, 4096).astype(np.int64)
-        off = groom.strand_offsets
-        sample = Groom(points=np.concatenate([groom.points[off[s]:off[s + 1]] for s in pick]),
-                       strand_offsets=np.concatenate([[0], np.cumsum(off[pick + 1] - off[pick])]))
+    The root extent is the diagonal of the bounding box of the strands' first points.  Nothing is copied
+    whole: lengths are summed in float64 a chunk at a time (:func:`~.groom.strand_lengths`), and a groom of
+    more than ``SIZE_SAMPLE_STRANDS`` strands is measured on an even sample of them."""
+    off = groom.strand_offsets
+    ns = groom.strand_count
+    if ns > SIZE_SAMPLE_STRANDS:  # a median over an even sample of strands is plenty for a warning
+        pick = np.linspace(0, ns - 1, SIZE_SAMPLE_STRANDS).astype(np.int64)
+        counts = off[pick + 1] - off[pick]
+        if int(counts.sum()) <= SIZE_SAMPLE_VERTICES:
+            pts = np.concatenate([groom.points[off[s]:off[s + 1]] for s in pick])
+            lengths = strand_lengths(pts, np.concatenate([[0], np.cumsum(counts)]))
+        else:  # long strands: measure each in place
+            lengths = np.concatenate([strand_lengths(groom.points, off, int(s), int(s) + 1) for s in pick])
     else:
-        sample = groom
-    med = float(np.median(sample.lengths())) if sample.strand_count else 0.0
+        lengths = strand_lengths(groom.points, off)
+    med = float(np.median(lengths)) if lengths.size else 0.0
     extent = None
-    if groom.strand_count >= 16:
-        roots = np.asarray(groom.points[groom.strand_offsets[:-1]], np.float64)
-        extent = float(np.linalg.norm(roots.max(0) - roots.min(0)))
+    if ns >= 16:
+        roots = groom.points[off[:-1]]
+        lo, hi = roots.min(0).astype(np.float64), roots.max(0).astype(np.float64)
+        extent = float(np.linalg.norm(hi - lo))
     return med, extent
 
 
@@ -276,28 +300,37 @@ def geometry_warnings(groom: Groom, path="") -> list:
     where = f"{os.fspath(path)}: " if path else ""
     out = []
     if groom.radius is not None and groom.radius.size:
-        r = np.asarray(groom.radius, np.float64)
+        r = np.asarray(groom.radius)  # compared in its own dtype: no float64 copy
         per_strand = r.shape[0] == groom.strand_count
         lo, hi = PLAUSIBLE_RADIUS_M
         bad = np.nonzero((r < lo) | (r > hi))[0]
         if bad.size:
             k = int(bad[0])
             s = k if per_strand else int(np.searchsorted(groom.strand_offsets, k, side="right") - 1)
-            out.append(f"{where}strand {s}: radius {r[k] * 1e6:.4g} um is implausible for hair (human hair: "
+            out.append(f"{where}strand {s}: radius {float(r[k]) * 1e6:.4g} um is implausible for hair (human hair: "
                        f"17-90 um; {bad.size} {'strands' if per_strand else 'vertices'} outside "
                        f"{lo * 1e6:g}-{hi * 1e6:g} um); set the radius in [material] or the file")
-    p = np.asarray(groom.points, np.float64)
-    if p.shape[0] >= 2:
-        e = np.linalg.norm(p[1:] - p[:-1], axis=1)
-        real = np.ones(e.shape[0], bool)
-        real[groom.strand_offsets[1:-1] - 1] = False
+    off = groom.strand_offsets
+    first, short_count = None, 0
+    for e0 in range(0, groom.vertex_count - 1, LENGTH_CHUNK_VERTICES):  # edges e0 .. e1 - 1, in float64
+        e1 = min(e0 + LENGTH_CHUNK_VERTICES, groom.vertex_count - 1)
+        p = np.asarray(groom.points[e0:e1 + 1], np.float64)
+        d = p[1:] - p[:-1]
+        e = np.sqrt(np.einsum("ij,ij->i", d, d))
+        edges = np.arange(e0, e1)
+        owner = np.searchsorted(off, edges, side="right") - 1
+        real = edges != off[owner + 1] - 1  # not a fake edge joining a tip to the next root
         short = np.nonzero(real & (e < SHORT_EDGE_M))[0]
         if short.size:
-            k = int(short[0])
-            s = int(np.searchsorted(groom.strand_offsets, k, side="right") - 1)
-            out.append(f"{where}strand {s}: edge {k - int(groom.strand_offsets[s])} is {e[k] * 1e6:.3g} um long "
-                       f"({short.size} edges shorter than {SHORT_EDGE_M * 1e6:g} um): such edges make the rods "
-                       "extremely stiff; resample the strands")
+            if first is None:
+                first = (int(edges[short[0]]), float(e[short[0]]))
+            short_count += int(short.size)
+    if first is not None:
+        k, length = first
+        s = int(np.searchsorted(off, k, side="right") - 1)
+        out.append(f"{where}strand {s}: edge {k - int(off[s])} is {length * 1e6:.3g} um long "
+                   f"({short_count} edges shorter than {SHORT_EDGE_M * 1e6:g} um): such edges make the rods "
+                   "extremely stiff; resample the strands")
     return out
 
 
@@ -315,8 +348,12 @@ def load_groom(path, format: str | None = None, scale: float | None = None, **op
 
     Raises:
         GroomFormatError: the file is malformed (the message names the file, the
-            byte offset, line or strand, and what was expected).
+            byte offset, line or strand, and what was expected), or the path is a
+            folder or cannot be read; a missing path raises
+            :class:`GroomFileNotFoundError`, which is both a GroomFormatError and a
+            FileNotFoundError.
     """
+    file_size(path)  # a missing path or a folder: GroomFormatError naming it, whatever the format
     fmt = normalize_format(format) if format else detect_format(path)
     if fmt == "tfxmesh":
         raise GroomFormatError(path, "is a TressFX collision mesh, not a groom; use taichi_hair.io.read_tfxmesh")

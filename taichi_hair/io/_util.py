@@ -3,20 +3,60 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
+import re
+import stat
 import struct
 import tempfile
 import warnings
 
 import numpy as np
 
-from .errors import GroomFormatError
+from .errors import GroomFileNotFoundError, GroomFormatError
 from .groom import Groom
 
+#: What a reader may allocate per byte of file when the format can expand (a deflated ``.thair.npz``):
+#: checked from the headers before anything is decompressed; ``max_bytes=`` overrides it per call.
+READ_EXPANSION = 16
+#: Slack on top of ``READ_EXPANSION`` times the file size, for small files [bytes].
+READ_SLACK_BYTES = 1 << 20
+
+
+def read_budget(size: int, max_bytes: int | None = None) -> int:
+    """Bytes a reader may allocate for a file of ``size`` bytes (``max_bytes`` when given)."""
+    return int(max_bytes) if max_bytes is not None else READ_EXPANSION * int(size) + READ_SLACK_BYTES
+
+
+def file_size(path) -> int:
+    """The size of a regular file; GroomFormatError naming the path for a missing path, a folder or
+    something that cannot be read (``GroomFileNotFoundError``, also a FileNotFoundError, when missing)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise GroomFileNotFoundError(path) from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the name
+        raise GroomFormatError(path, f"cannot read the file ({_os_reason(exc)})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise GroomFormatError(path, "is a folder, not a groom file")
+    if not stat.S_ISREG(st.st_mode):
+        raise GroomFormatError(path, "is not a regular file")
+    return int(st.st_size)
+
+
+def _os_reason(exc: BaseException) -> str:
+    return getattr(exc, "strerror", None) or str(exc)
+
+
 def read_bytes(path) -> bytes:
-    """The whole file (its size bounds every later allocation); an empty file is an error."""
-    with open(path, "rb") as fh:
-        data = fh.read()
+    """The whole file in one read (its size bounds every later allocation); an empty file, a missing path
+    or a folder is a GroomFormatError naming the path."""
+    file_size(path)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise GroomFormatError(path, f"cannot read the file ({_os_reason(exc)})") from None
     if not data:
         raise GroomFormatError(path, "the file is empty")
     return data
@@ -65,12 +105,52 @@ def finish(groom: Groom, path) -> Groom:
     """Validate a freshly read groom, turning ValueError into GroomFormatError naming the file."""
     try:
         groom.validate()
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:
         msg = str(exc)
         if msg.startswith("Groom: "):
             msg = msg[len("Groom: "):]
         raise GroomFormatError(path, msg) from None
     return groom
+
+
+#: The deepest nesting of lists and objects accepted in a file's params JSON (a file that nests deeper is
+#: refused instead of exhausting Python's recursion limit while decoding it or writing it back).
+MAX_PARAMS_DEPTH = 64
+
+
+def json_depth(text: str) -> int:
+    """The deepest nesting of ``[`` and ``{`` in a JSON text, strings left out (vectorised: no recursion)."""
+    bare = _JSON_STRING.sub("", text).encode("utf-8", "replace")
+    if not bare:
+        return 0
+    c = np.frombuffer(bare, np.uint8)
+    step = np.isin(c, _OPENS).astype(np.int64) - np.isin(c, _CLOSES)
+    return int(np.cumsum(step).max(initial=0))
+
+
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+_OPENS, _CLOSES = np.frombuffer(b"[{", np.uint8), np.frombuffer(b"]}", np.uint8)
+
+
+def parse_params(path, text, what: str = "'params'", objects_only: bool = True) -> dict:
+    """A params JSON object from a file: GroomFormatError naming ``what`` when it is not JSON, not an
+    object (``objects_only=False``: anything else reads as ``{}``), or nests deeper than
+    :data:`MAX_PARAMS_DEPTH`."""
+    if not isinstance(text, str):
+        raise GroomFormatError(path, f"{what} is a {type(text).__name__}; expected a JSON string")
+    depth = json_depth(text)
+    if depth > MAX_PARAMS_DEPTH:
+        raise GroomFormatError(path, f"{what} nests lists or objects {depth} levels deep; at most "
+                                     f"{MAX_PARAMS_DEPTH} are accepted")
+    try:
+        value = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise GroomFormatError(path, f"{what} is not JSON ({type(exc).__name__}: {str(exc)[:200]})") from None
+    if not isinstance(value, dict):
+        if not objects_only:
+            return {}
+        raise GroomFormatError(path, f"{what} is a JSON {type(value).__name__}; expected an object")
+    return value
 
 
 def offsets_from_counts(counts: np.ndarray) -> np.ndarray:

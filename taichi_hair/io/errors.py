@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 
 
@@ -38,3 +39,18 @@ class GroomFormatError(ValueError):
             where.append(f"strand {strand}")
         prefix = f"{self.path}: " + (", ".join(where) + ": " if where else "")
         super().__init__(prefix + reason)
+
+
+class GroomFileNotFoundError(GroomFormatError, FileNotFoundError):
+    """The groom path does not exist.  Both a :class:`GroomFormatError` (what every reader raises, so one
+    ``except GroomFormatError`` covers every bad path) and a ``FileNotFoundError`` (what ``open`` raises, so
+    code catching that keeps working); ``errno`` is ``ENOENT``."""
+
+    def __init__(self, path, reason: str = "no such file", **where):
+        super().__init__(path, reason, **where)
+        self.errno = errno.ENOENT
+        self.strerror = reason
+        self.filename = self.path
+
+    def __str__(self) -> str:  # the one-line message, not OSError's "[Errno 2] ..." form
+        return self.args[0]

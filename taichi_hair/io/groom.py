@@ -28,6 +28,33 @@ def _per(name: str, arr: np.ndarray, strands: int, vertices: int, width: int | N
     raise ValueError(f"Groom: field '{name}' has shape {arr.shape}; expected {want}")
 
 
+#: Vertices converted to float64 at a time by :func:`strand_lengths` (bounds its temporary memory).
+LENGTH_CHUNK_VERTICES = 1 << 16
+
+
+def strand_lengths(points: np.ndarray, strand_offsets: np.ndarray, first: int = 0, last: int | None = None,
+                   chunk: int = LENGTH_CHUNK_VERTICES) -> np.ndarray:
+    """Arc length of strands ``first:last`` [units], float64, shape (last - first,).
+
+    Works through the vertices ``chunk`` at a time (float64 differences of that many points), so the
+    temporary memory is O(chunk) whatever the groom's size; the sums run in vertex order."""
+    off = np.asarray(strand_offsets, dtype=np.int64)
+    last = off.shape[0] - 1 if last is None else int(last)
+    sub = off[first:last + 1]
+    out = np.zeros(max(last - first, 0))
+    v0, v1 = int(sub[0]), int(sub[-1])
+    for e0 in range(v0, v1 - 1, chunk):
+        e1 = min(e0 + chunk, v1 - 1)  # edges e0 .. e1 - 1; edge e joins vertices e and e + 1
+        p = np.asarray(points[e0:e1 + 1], dtype=np.float64)
+        d = p[1:] - p[:-1]
+        seg = np.sqrt(np.einsum("ij,ij->i", d, d))
+        s = np.searchsorted(sub, np.arange(e0, e1), side="right") - 1  # strand of each edge (local index)
+        seg[np.arange(e0, e1) == sub[s + 1] - 1] = 0.0  # the fake edges joining a tip to the next root
+        lo = int(s[0])
+        out[lo:int(s[-1]) + 1] += np.bincount(s - lo, weights=seg)
+    return out
+
+
 @dataclass
 class Groom:
     """Hair strands as polylines, with optional per-strand / per-vertex attributes.
@@ -95,15 +122,9 @@ class Groom:
         return self.points[self.strand_offsets[i]:self.strand_offsets[i + 1]]
 
     def lengths(self) -> np.ndarray:
-        """Arc length of each strand [units], float64, shape (S,)."""
-        pts = self.points.astype(np.float64, copy=False)
-        off = np.asarray(self.strand_offsets, dtype=np.int64)
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        if seg.size == 0:
-            return np.zeros(self.strand_count)
-        seg[off[1:-1] - 1] = 0.0  # the fake segments joining a tip to the next strand's root
-        # Strand s sums seg[off[s]:off[s + 1] - 1] (plus its zeroed join).
-        return np.add.reduceat(seg, off[:-1])
+        """Arc length of each strand [units], float64, shape (S,) (in float64 a chunk at a time, so a
+        float32 groom is never copied whole)."""
+        return strand_lengths(self.points, self.strand_offsets)
 
     # ------------------------------------------------------------------ construction
     @classmethod

@@ -39,6 +39,13 @@ SEGMENT_NAMES = ("segments", "segment_count", "num_segments", "nsegments", "nseg
 VERTEX_COUNT_NAMES = ("vertex_count", "num_vertices", "nverts", "nvertices", "point_count", "num_points",
                       "npoints", "vertices")
 MAX_HEADER_BYTES = 1 << 20
+#: Properties the reader uses, per element: each must be a scalar (one value per record), not a list.
+SCALAR_PROPERTIES = {
+    "vertex": {"x", "y", "z", "rest_x", "rest_y", "rest_z", "radius", "width", "thickness", "red", "green", "blue",
+               "r", "g", "b", "pinned"},
+    "strand": set(SEGMENT_NAMES + VERTEX_COUNT_NAMES) | {"radius", "region", "guide"},
+    "edge": {"vertex1", "vertex2", "v1", "v2"},
+}
 
 
 class _Element:
@@ -47,6 +54,17 @@ class _Element:
         self.count = count
         self.line = line
         self.props: list[tuple[str, str, str | None]] = []  # (name, value type, list count type or None)
+        self.prop_lines: dict[str, int] = {}  # header line of each property
+
+    def add(self, name: str, value_type: str, count_type: str | None, line: int, path) -> None:
+        if name in self.prop_lines:
+            raise GroomFormatError(path, f"element {self.name!r} declares property {name!r} twice (first on line "
+                                         f"{self.prop_lines[name]})", line=line)
+        self.props.append((name, value_type, count_type))
+        self.prop_lines[name] = line
+
+    def lists(self) -> set:
+        return {n for n, _, c in self.props if c is not None}
 
     @property
     def has_list(self) -> bool:
@@ -91,11 +109,11 @@ def _parse_header(data: bytes, path):
             if not elements:
                 raise GroomFormatError(path, "a property line comes before any element", line=i)
             if len(tok) == 3 and tok[1] in TYPES:
-                elements[-1].props.append((tok[2], TYPES[tok[1]], None))
+                elements[-1].add(tok[2], TYPES[tok[1]], None, i, path)
             elif len(tok) == 5 and tok[1] == "list" and tok[2] in TYPES and tok[3] in TYPES:
                 if TYPES[tok[2]][0] == "f":
                     raise GroomFormatError(path, f"list count type {tok[2]!r} is not an integer type", line=i)
-                elements[-1].props.append((tok[4], TYPES[tok[3]], TYPES[tok[2]]))
+                elements[-1].add(tok[4], TYPES[tok[3]], TYPES[tok[2]], i, path)
             else:
                 raise GroomFormatError(path, f"unsupported property line {raw.strip()!r}", line=i)
         else:
@@ -221,6 +239,10 @@ def read_ply(path) -> Groom:
         raise GroomFormatError(path, f"no 'vertex' element (elements: {names})")
     if len(set(names)) != len(names):
         raise GroomFormatError(path, f"an element is declared twice ({names})")
+    for el in elements:  # a list where the reader needs one value per record: refused, naming its line
+        for n in sorted(el.lists() & SCALAR_PROPERTIES.get(el.name, set())):
+            raise GroomFormatError(path, f"element {el.name!r} property {n!r} is declared as a list; the strand "
+                                         f"reader needs one value per {el.name}", line=el.prop_lines[n])
     if fmt == "ascii":
         els = _read_ascii(data, path, elements, body)
     else:
@@ -240,7 +262,8 @@ def read_ply(path) -> Groom:
     if st is not None:
         cname = next((n for n in st if n in SEGMENT_NAMES + VERTEX_COUNT_NAMES), None)
         if cname is None:
-            scalar = [n for n in st if np.ndim(st[n]) == 1 and st[n].dtype.kind in "iu"]
+            lists = next(e for e in elements if e.name == "strand").lists()
+            scalar = [n for n in st if n not in lists and st[n].dtype.kind in "iu"]
             if len(scalar) != 1:
                 raise GroomFormatError(path, f"cannot tell which strand property is the segment count "
                                              f"(properties: {sorted(st)}); expected one named 'segments'")

@@ -93,6 +93,11 @@ def _read_tfx_v4(r: ByteReader, path, version: float) -> Groom:
     for k, (o, sz) in enumerate(zip(offs, sizes)):
         if o:
             r.need(o, sz, f"the {V4_OFFSET_NAMES[k]} array")
+    end = max(o + sz for o, sz in zip(offs, sizes) if o)
+    if end != r.size:  # the loader reads S * V records from each offset: a smaller S would drop strands
+        raise GroomFormatError(path, f"the header's {ns} strands x {nv} vertices end at byte {end} but the file has "
+                                     f"{r.size} bytes ({r.size - end} bytes not read); is the strand count wrong?",
+                               offset=4)
     xyzw = r.array(vo, "<f4", 4 * n, "vertex positions").reshape(n, 4)
     w = xyzw[:, 3]
     bad = np.nonzero(~np.isfinite(w) | (w < 0))[0]
@@ -150,6 +155,15 @@ def _read_tfx_ascii(data: bytes, path) -> Groom:
             counts.append(n)
             i += n
             continue
+        if counts:  # after the strands only strands follow: a count too small leaves coordinates here
+            s = len(counts) - 1
+            raise GroomFormatError(path, f"expected 'strand {s + 1} numVerts ...' or the end of the file after "
+                                         f"the {counts[-1]} points of strand {s} (its numVerts), found "
+                                         f"{lines[i - 1].strip()[:40].decode('latin-1')!r}; is numVerts too small?",
+                                   line=i, strand=s)
+        if not (tok[0][:1].isalpha() or tok[0][:1] == b"_"):
+            raise GroomFormatError(path, f"expected a header keyword ('version', 'numStrands', ...), found "
+                                         f"{lines[i - 1].strip()[:40].decode('latin-1')!r}", line=i)
         if not version_seen and key != "version":
             raise GroomFormatError(path, f"expected the first line to be 'version 2.0', found {key!r}", line=i)
         val = [t.decode("latin-1") for t in tok[1:]]

@@ -33,7 +33,7 @@ import warnings
 
 import numpy as np
 
-from ._util import atomic_path, finish, offsets_from_counts, prepare_write
+from ._util import atomic_path, file_size, finish, offsets_from_counts, parse_params, prepare_write
 from . import _usd_extract
 from .errors import GroomFormatError
 from .groom import Groom
@@ -92,11 +92,12 @@ def read_usd(path, isolate: bool = True) -> Groom:
             becomes a GroomFormatError.  ``isolate=False`` reads in this process
             (about 0.5 s faster per file) with only the address-space cap.
     """
-    if os.path.getsize(path) == 0:  # also raises the OSError for a missing file
+    size = file_size(path)  # a missing path or a folder: GroomFormatError naming it
+    if size == 0:
         raise GroomFormatError(path, "the file is empty")
-    budget = USD_READ_BASE_BYTES + USD_READ_BYTES_PER_FILE_BYTE * os.path.getsize(path)
+    budget = USD_READ_BASE_BYTES + USD_READ_BYTES_PER_FILE_BYTE * size
     if isolate:
-        meta, arrays = _extract_in_child(path, budget)
+        meta, arrays = _extract_in_child(path, budget, size)
     else:
         _pxr()
         try:
@@ -110,8 +111,8 @@ def read_usd(path, isolate: bool = True) -> Groom:
     return _build_groom(path, meta, arrays)
 
 
-def _extract_in_child(path, budget: int):
-    timeout = 60.0 + os.path.getsize(path) / 1e6  # a second per MB on top of a minute
+def _extract_in_child(path, budget: int, size: int):
+    timeout = 60.0 + size / 1e6  # a second per MB on top of a minute
     with tempfile.TemporaryDirectory() as d:
         out = os.path.join(d, "arrays.npz")
         cmd = [sys.executable, _usd_extract.__file__, os.path.abspath(os.fspath(path)), out, str(budget)]
@@ -154,13 +155,8 @@ def _build_groom(path, meta: dict, arrays: dict) -> Groom:
     units = ""
     for p in prims:
         if p["params"] is not None:
-            try:
-                more = json.loads(p["params"])
-            except ValueError as exc:
-                raise GroomFormatError(path, f"{p['path']}: customData taichiHair:params is not JSON ({exc})") \
-                    from None
-            if isinstance(more, dict):
-                params.update(more)
+            params.update(parse_params(path, p["params"], f"{p['path']}: customData taichiHair:params",
+                                       objects_only=False))
         units = p["units"] or units
     mpu = meta.get("meters_per_unit")
     if not units and mpu is not None:
