@@ -317,13 +317,13 @@ def geometry_warnings(groom: Groom, path="") -> list:
         p = np.asarray(groom.points[e0:e1 + 1], np.float64)
         d = p[1:] - p[:-1]
         e = np.sqrt(np.einsum("ij,ij->i", d, d))
-        edges = np.arange(e0, e1)
-        owner = np.searchsorted(off, edges, side="right") - 1
-        real = edges != off[owner + 1] - 1  # not a fake edge joining a tip to the next root
-        short = np.nonzero(real & (e < SHORT_EDGE_M))[0]
+        lo, hi = np.searchsorted(off, [e0, e1 - 1], side="right") - 1
+        joins = off[lo + 1:hi + 2] - 1 - e0
+        e[joins[joins < e1 - e0]] = np.inf  # the fake edges joining a tip to the next root are not short
+        short = np.nonzero(e < SHORT_EDGE_M)[0]
         if short.size:
             if first is None:
-                first = (int(edges[short[0]]), float(e[short[0]]))
+                first = (e0 + int(short[0]), float(e[short[0]]))
             short_count += int(short.size)
     if first is not None:
         k, length = first

@@ -29,7 +29,7 @@ def _per(name: str, arr: np.ndarray, strands: int, vertices: int, width: int | N
 
 
 #: Vertices converted to float64 at a time by :func:`strand_lengths` (bounds its temporary memory).
-LENGTH_CHUNK_VERTICES = 1 << 16
+LENGTH_CHUNK_VERTICES = 1 << 15
 
 
 def strand_lengths(points: np.ndarray, strand_offsets: np.ndarray, first: int = 0, last: int | None = None,
@@ -48,10 +48,12 @@ def strand_lengths(points: np.ndarray, strand_offsets: np.ndarray, first: int = 
         p = np.asarray(points[e0:e1 + 1], dtype=np.float64)
         d = p[1:] - p[:-1]
         seg = np.sqrt(np.einsum("ij,ij->i", d, d))
-        s = np.searchsorted(sub, np.arange(e0, e1), side="right") - 1  # strand of each edge (local index)
-        seg[np.arange(e0, e1) == sub[s + 1] - 1] = 0.0  # the fake edges joining a tip to the next root
-        lo = int(s[0])
-        out[lo:int(s[-1]) + 1] += np.bincount(s - lo, weights=seg)
+        lo, hi = np.searchsorted(sub, [e0, e1 - 1], side="right") - 1  # strands of the first and last edge
+        joins = sub[lo + 1:hi + 2] - 1 - e0  # the fake edges joining a tip to the next root
+        seg[joins[joins < e1 - e0]] = 0.0
+        starts = sub[lo:hi + 1] - e0  # strictly increasing (a strand has >= 1 edge), the first clipped to 0
+        starts[0] = 0
+        out[lo:hi + 1] += np.add.reduceat(seg, starts)
     return out
 
 
