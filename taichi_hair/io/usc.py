@@ -42,8 +42,49 @@ def walk_strands(data: bytes, path, floats_per_point: int):
         raise GroomFormatError(path, f"strand count {ns} needs at least {4 * ns} bytes of strand headers but the "
                                      f"file has {size - 4} bytes after the count", offset=0)
     stride = floats_per_point
-    counts = np.empty(ns, dtype=np.int64)
-    starts = np.empty(ns, dtype=np.int64)
+    all_words = np.frombuffer(data, dtype="<i4")
+    n0 = words[1]
+    if n0 >= 0 and nw == 1 + ns * (1 + n0 * stride):  # every strand as long as the first: checked at once
+        heads = 1 + np.arange(ns, dtype=np.int64) * (1 + n0 * stride)
+        if not np.all(all_words[heads] == n0):
+            heads = None
+    else:
+        heads = None
+    if heads is None:
+        heads = _walk(words, nw, ns, stride)
+        if heads is None:  # a count that does not fit: walk again with the checks that name the strand
+            _walk_checked(words, nw, ns, stride, size, path)
+    counts = all_words[heads].astype(np.int64)
+    starts = heads + 1
+    # Every word but the count and the strand headers is a coordinate: drop those with one mask.
+    keep = np.ones(nw, dtype=bool)
+    keep[0] = False
+    keep[starts - 1] = False
+    pts = np.frombuffer(data, dtype="<f4")[keep].reshape(-1, stride).astype(np.float32, copy=False)
+    return pts, counts
+
+
+def _walk(words, nw: int, ns: int, stride: int):
+    """Word index of each strand header (int64 array), or None when a count is negative or runs past the end
+    of the file or the strands end before it; the loop does nothing else (it is the per-strand cost)."""
+    heads = []
+    append = heads.append
+    h = 1
+    for _ in range(ns):
+        if h >= nw:
+            return None
+        n = words[h]
+        if n < 0:
+            return None
+        append(h)
+        h += 1 + n * stride
+    if h != nw:
+        return None
+    return np.array(heads, dtype=np.int64)
+
+
+def _walk_checked(words, nw: int, ns: int, stride: int, size: int, path) -> None:
+    """The walk again, raising GroomFormatError naming the first strand whose count does not fit."""
     h = 1
     for s in range(ns):
         if h >= nw:
@@ -55,18 +96,9 @@ def walk_strands(data: bytes, path, floats_per_point: int):
         if n * stride > nw - h - 1:
             raise GroomFormatError(path, f"point count {n} needs {4 * n * stride} bytes but the file has "
                                          f"{4 * (nw - h - 1)} bytes left", offset=4 * h, strand=s)
-        counts[s] = n
-        starts[s] = h + 1
         h += 1 + n * stride
-    if h != nw:
-        raise GroomFormatError(path, f"{4 * (nw - h)} bytes follow the last of {ns} strands; expected the file to "
-                                     f"end there", offset=4 * h)
-    # Every word but the count and the strand headers is a coordinate: drop those with one mask.
-    keep = np.ones(nw, dtype=bool)
-    keep[0] = False
-    keep[starts - 1] = False
-    pts = np.frombuffer(data, dtype="<f4")[keep].reshape(-1, stride).astype(np.float32, copy=False)
-    return pts, counts
+    raise GroomFormatError(path, f"{4 * (nw - h)} bytes follow the last of {ns} strands; expected the file to "
+                                 f"end there", offset=4 * h)
 
 
 def groom_from_walk(path, pts: np.ndarray, counts: np.ndarray, **attrs) -> Groom:
