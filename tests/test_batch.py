@@ -220,3 +220,26 @@ name = "long"
     summary = json.loads((out2 / "long" / "summary.json").read_text())
     assert summary["resumed_from_frame"] is not None and summary["resumed_from_frame"] > 0, summary
     assert np.array_equal(np.load(out2 / "long" / "frames.npz")["positions"], want)
+
+
+@pytest.mark.slow
+def test_a_batch_runs_on_an_existing_cluster_through_its_scheduler_address(tmp_path, monkeypatch):
+    """--scheduler tcp://...: a cluster started apart (here a LocalCluster of this test process, one worker)
+    runs the same runs; the frames equal those of a LocalCluster batch, bit for bit."""
+    pytest.importorskip("distributed")
+    import logging
+
+    from distributed import LocalCluster
+
+    spec = _spec(tmp_path, '[batch]\nscene = "hang"\nstrands = 3\nframes = 2\n[sweep]\nseed = [0, 1]\n')
+    monkeypatch.setenv("PYTHONPATH", ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))  # for the workers
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR) as cluster:
+        proc = _batch(spec, "--out", tmp_path / "remote", "--scheduler", cluster.scheduler_address, "--quiet")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    proc = _batch(spec, "--out", tmp_path / "local", "--workers", "1", "--quiet")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    for name in ("sweep_seed-0", "sweep_seed-1"):
+        a = np.load(tmp_path / "remote" / name / "frames.npz")["positions"]
+        b = np.load(tmp_path / "local" / name / "frames.npz")["positions"]
+        assert np.array_equal(a, b)
