@@ -153,11 +153,18 @@ def test_ply_list_where_one_value_per_record_is_needed_is_refused_naming_its_lin
     assert err.line == 4
 
 
-def test_ply_list_property_of_an_element_the_reader_ignores_is_read_and_ignored(tmp_path):
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_ply_list_property_of_an_element_the_reader_ignores_is_read_and_ignored(tmp_path, fmt):
     """Lists elsewhere (a face element, an unused vertex property) are a valid layout: the strands are read."""
-    p = _ply(tmp_path, vprops=("float x", "float y", "float z", "list uchar int tags"),
-             more="element face 1\nproperty list uchar int vertex_indices\n",
-             body=b"0 0 0 0\n0 1 0 2 7 8\n0 0 1 1 5\n1 1 1 0\n1\n1\n3 0 1 2\n")
+    rows = [((0, 0, 0), (0,)), ((0, 1, 0), (7, 8)), ((0, 0, 1), (5,)), ((1, 1, 1), ())]
+    if fmt == "ascii":
+        body = b"0 0 0 0\n0 1 0 2 7 8\n0 0 1 1 5\n1 1 1 0\n1\n1\n3 0 1 2\n"
+    else:
+        body = b"".join(struct.pack("<3fB", *xyz, len(tags)) + struct.pack(f"<{len(tags)}i", *tags)
+                        for xyz, tags in rows)
+        body += struct.pack("<2i", 1, 1) + struct.pack("<B3i", 3, 0, 1, 2)
+    p = _ply(tmp_path, fmt, vprops=("float x", "float y", "float z", "list uchar int tags"),
+             more="element face 1\nproperty list uchar int vertex_indices\n", body=body)
     g = _read(p)
     assert g.strand_count == 2
     np.testing.assert_array_equal(g.points, [[0, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])

@@ -14,8 +14,10 @@ them.  Recognised content:
 - without a strand element, an ``element edge`` with ``vertex1 vertex2``
   joining consecutive vertices defines the strands as its chains.
 
-Other elements and properties (lists included) are parsed, checked for size
-and ignored.  The writer writes binary little-endian by default
+Other elements and properties are parsed, checked for size and ignored; a
+list property is accepted wherever the reader does not need the value (a
+``face`` element's ``vertex_indices``) and refused, naming its header line,
+where it does (``x``, ``segments``, ``radius``...: one value per record).  The writer writes binary little-endian by default
 (``ascii=True`` for text), colours as uchar.
 """
 
@@ -144,24 +146,27 @@ def _read_binary(data: bytes, path, elements, offset: int, order: str) -> dict:
         if el.count * minimum > r.size - offset:
             raise GroomFormatError(path, f"element {el.name!r} count {el.count} needs at least "
                                          f"{el.count * minimum} bytes but {r.size - offset} remain", offset=offset)
-        cols = {n: [] for n, _, _ in el.props}
-        for _ in range(el.count):
-            for n, t, c in el.props:
-                if c is None:
-                    v = r.array(offset, order + t, 1, f"element {el.name!r} property {n!r}")
-                    offset += v.itemsize
-                    cols[n].append(v[0])
-                else:
-                    k = int(r.array(offset, order + c, 1, f"element {el.name!r} list count {n!r}")[0])
-                    offset += np.dtype(c).itemsize
-                    if k < 0:
-                        raise GroomFormatError(path, f"element {el.name!r} list {n!r} has a negative length {k}",
-                                               offset=offset)
-                    v = r.array(offset, order + t, k, f"element {el.name!r} list {n!r}")
-                    offset += v.nbytes
-                    cols[n].append(v)
-        out[el.name] = {n: (np.array(v) if c is None else v) for (n, _, c), v in
-                        zip(el.props, cols.values())}
+        # Scalars go into arrays of the element's count (bounded by the size check above); lists, which the
+        # reader never uses (a used property must be a scalar), are walked over, not kept.
+        cols = {n: np.empty(el.count, order + t) for n, t, c in el.props if c is None}
+        steps = [(cols.get(n), np.dtype(order + (c or t)), None if c is None else np.dtype(order + t), n)
+                 for n, t, c in el.props]
+        data_ = r.data
+        for j in range(el.count):
+            for col, dt, item, n in steps:
+                r.need(offset, dt.itemsize, f"element {el.name!r} property {n!r}")
+                v = np.frombuffer(data_, dt, 1, offset)[0]
+                offset += dt.itemsize
+                if item is None:
+                    col[j] = v
+                    continue
+                k = int(v)
+                if k < 0:
+                    raise GroomFormatError(path, f"element {el.name!r} list {n!r} has a negative length {k}",
+                                           offset=offset)
+                r.need(offset, k * item.itemsize, f"element {el.name!r} list {n!r}")
+                offset += k * item.itemsize
+        out[el.name] = {n: c.astype(c.dtype.newbyteorder("=")) for n, c in cols.items()}
     if offset != r.size:
         raise GroomFormatError(path, f"{r.size - offset} bytes follow the last element; expected the file to end",
                                offset=offset)
@@ -197,7 +202,7 @@ def _read_ascii(data: bytes, path, elements, offset: int) -> dict:
                                            line=_body_line(data, offset) + first_line) from None
             out[el.name] = cols
             continue
-        cols = {n: [] for n, _, _ in el.props}
+        cols = {n: np.empty(el.count, t) for n, t, c in el.props if c is None}
         for j in range(el.count):
             toks = lines[li].split()
             li += 1
@@ -205,21 +210,21 @@ def _read_ascii(data: bytes, path, elements, offset: int) -> dict:
             try:
                 for n, t, c in el.props:
                     if c is None:
-                        cols[n].append(np.array(toks[pos], dtype=t))
+                        cols[n][j] = np.array(toks[pos], dtype=t)
                         pos += 1
-                    else:
+                    else:  # a list the reader does not use: its values checked, not kept
                         k = int(toks[pos])
                         if k < 0 or pos + 1 + k > len(toks):
                             raise ValueError(f"list {n!r} length {k} does not match the {len(toks) - pos - 1} "
                                              f"values left on the line")
-                        cols[n].append(np.array(toks[pos + 1:pos + 1 + k], dtype=t))
+                        np.array(toks[pos + 1:pos + 1 + k], dtype=t)
                         pos += 1 + k
                 if pos != len(toks):
                     raise ValueError(f"{len(toks) - pos} extra values")
             except (ValueError, IndexError, OverflowError) as exc:
                 raise GroomFormatError(path, f"element {el.name!r} record {j}: {exc}",
                                        line=_body_line(data, offset) + li - 1) from None
-        out[el.name] = {n: (np.array(v) if c is None else v) for (n, _, c), v in zip(el.props, cols.values())}
+        out[el.name] = cols
     rest = b"".join(lines[li:]).strip()
     if rest:
         raise GroomFormatError(path, "data follows the last element; expected the file to end",
