@@ -14,7 +14,8 @@ exception by type, ``bad-message`` (a GroomFormatError not naming the file, or o
 ``invalid`` (a groom that fails ``validate``), ``timeout``, ``memory`` (MemoryError under the cap) and
 ``crash`` (the worker died).  Only ``ok`` and ``GroomFormatError`` are acceptable; the exit status is 1
 otherwise.  USD is read in the worker itself (``isolate=False``: the worker is the isolation, and a child
-process per file would cost ~0.5 s each); ``--usd-isolated`` uses the default child-process reader.
+process per file would cost ~0.5 s each); ``--usd-isolated`` uses the default child-process reader, whose
+child caps itself (``usd.USD_READ_BASE_BYTES`` + 64 x the file), so the worker's cap is not applied then.
 Prints the table and writes ``benchmarks/results/fuzz_readers.json`` (with up to ``--examples`` mutation
 descriptions per unacceptable outcome, each reproducible from ``--seed``, the format and the index).
 """
@@ -509,7 +510,9 @@ def worker(conn, memory_factor: float, slack: int, usd_isolated: bool, quiet: bo
         path, fmt = job
         size = os.path.getsize(path)
         resource.setrlimit(resource.RLIMIT_AS, (resource.RLIM_INFINITY, hard))
-        resource.setrlimit(resource.RLIMIT_AS, (_address_space() + int(memory_factor * size) + slack, hard))
+        if not (usd_isolated and fmt in ("usda", "usdc")):  # the isolated reader caps its own child (which
+            # would inherit this cap, too small for a fresh interpreter loading usd-core: it segfaults)
+            resource.setrlimit(resource.RLIMIT_AS, (_address_space() + int(memory_factor * size) + slack, hard))
         t0 = time.perf_counter()
         try:
             g = _read_one(path, fmt, usd_isolated)
