@@ -193,24 +193,27 @@ def groom_size(groom: Groom) -> tuple:
 
     The root extent is the diagonal of the bounding box of the strands' first points.  Nothing is copied
     whole: lengths are summed in float64 a chunk at a time (:func:`~.groom.strand_lengths`), and a groom of
-    more than ``SIZE_SAMPLE_STRANDS`` strands is measured on an even sample of them."""
+    more than ``SIZE_SAMPLE_STRANDS`` strands is measured (lengths and root box) on an even sample of them."""
     off = groom.strand_offsets
     ns = groom.strand_count
-    if ns > SIZE_SAMPLE_STRANDS:  # a median over an even sample of strands is plenty for a warning
+    if ns > SIZE_SAMPLE_STRANDS:  # a median and a root box over an even sample of strands: plenty for a warning
         pick = np.linspace(0, ns - 1, SIZE_SAMPLE_STRANDS).astype(np.int64)
         counts = off[pick + 1] - off[pick]
-        if int(counts.sum()) <= SIZE_SAMPLE_VERTICES:
-            pts = np.concatenate([groom.points[off[s]:off[s + 1]] for s in pick])
-            lengths = strand_lengths(pts, np.concatenate([[0], np.cumsum(counts)]))
+        sample_off = np.concatenate([[0], np.cumsum(counts)])
+        if int(sample_off[-1]) <= SIZE_SAMPLE_VERTICES:  # gather the sampled strands' points at once
+            idx = np.arange(int(sample_off[-1])) + np.repeat(off[pick] - sample_off[:-1], counts)
+            lengths = strand_lengths(groom.points[idx], sample_off)
         else:  # long strands: measure each in place
             lengths = np.concatenate([strand_lengths(groom.points, off, int(s), int(s) + 1) for s in pick])
+        roots = groom.points[off[pick]]
     else:
         lengths = strand_lengths(groom.points, off)
+        roots = groom.points[off[:-1]]
     med = float(np.median(lengths)) if lengths.size else 0.0
     extent = None
     if ns >= 16:
-        roots = groom.points[off[:-1]]
-        lo, hi = roots.min(0).astype(np.float64), roots.max(0).astype(np.float64)
+        cols = np.ascontiguousarray(roots.T)  # a reduction per row of (3, S): faster than along axis 0
+        lo, hi = cols.min(1).astype(np.float64), cols.max(1).astype(np.float64)
         extent = float(np.linalg.norm(hi - lo))
     return med, extent
 
@@ -308,21 +311,24 @@ def geometry_warnings(groom: Groom, path="") -> list:
                        f"{lo * 1e6:g}-{hi * 1e6:g} um); set the radius in [material] or the file")
     off = groom.strand_offsets
     first, short_count = None, 0
-    for e0 in range(0, groom.vertex_count - 1, LENGTH_CHUNK_VERTICES):  # edges e0 .. e1 - 1, in float64
+    # Squared edge lengths in the points' own dtype, a chunk at a time (float32 resolves 20 um edges of a
+    # metre-sized groom to ~1e-3 of the threshold; no float64 copy).
+    threshold = np.asarray(SHORT_EDGE_M ** 2, groom.points.dtype)
+    for e0 in range(0, groom.vertex_count - 1, LENGTH_CHUNK_VERTICES):  # edges e0 .. e1 - 1
         e1 = min(e0 + LENGTH_CHUNK_VERTICES, groom.vertex_count - 1)
-        p = np.asarray(groom.points[e0:e1 + 1], np.float64)
+        p = groom.points[e0:e1 + 1]
         d = p[1:] - p[:-1]
-        e = np.sqrt(np.einsum("ij,ij->i", d, d))
+        sq = np.einsum("ij,ij->i", d, d)
         lo, hi = np.searchsorted(off, [e0, e1 - 1], side="right") - 1
         joins = off[lo + 1:hi + 2] - 1 - e0
-        e[joins[joins < e1 - e0]] = np.inf  # the fake edges joining a tip to the next root are not short
-        short = np.nonzero(e < SHORT_EDGE_M)[0]
+        sq[joins[joins < e1 - e0]] = np.inf  # the fake edges joining a tip to the next root are not short
+        short = np.nonzero(sq < threshold)[0]
         if short.size:
-            if first is None:
-                first = (e0 + int(short[0]), float(e[short[0]]))
+            first = e0 + int(short[0]) if first is None else first
             short_count += int(short.size)
     if first is not None:
-        k, length = first
+        k = first
+        length = float(np.linalg.norm(np.asarray(groom.points[k + 1], np.float64) - groom.points[k]))
         s = int(np.searchsorted(off, k, side="right") - 1)
         out.append(f"{where}strand {s}: edge {k - int(off[s])} is {length * 1e6:.3g} um long "
                    f"({short_count} edges shorter than {SHORT_EDGE_M * 1e6:g} um): such edges make the rods "
