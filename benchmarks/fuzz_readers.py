@@ -500,6 +500,7 @@ def worker(conn, memory_factor: float, slack: int, usd_isolated: bool, quiet: bo
     if usd_isolated is False:
         _warm_up_usd()
     _, hard = resource.getrlimit(resource.RLIMIT_AS)
+    conn.send("ready")  # the start (imports, usd-core's warm-up) does not count against a file's timeout
     while True:
         try:
             job = conn.recv()
@@ -551,6 +552,8 @@ class Pool:
         p = self.ctx.Process(target=worker, args=(child,) + self.args, daemon=True)
         p.start()
         child.close()
+        if not parent.poll(300) or parent.recv() != "ready":
+            raise RuntimeError("a fuzz worker did not start within 300 s")
         return {"proc": p, "conn": parent, "job": None, "t0": 0.0}
 
     def _replace(self, i: int) -> None:
