@@ -21,8 +21,13 @@ tfxmesh    .tfxmesh                    no     TressFX collision mesh:
                                               :func:`read_tfxmesh`
 =========  ==========================  =====  ==================================
 
-Every reader raises :class:`GroomFormatError` (a ``ValueError``) for a bad file,
-checking counts against the file size before allocating; every writer writes a
+Every reader raises :class:`GroomFormatError` (a ``ValueError``) for a bad file, a
+folder or an unreadable path, with a one-line message naming the file and the byte,
+line or strand (a missing path: :class:`GroomFileNotFoundError`, also a
+``FileNotFoundError``).  Readers check counts against the file size before
+allocating, and a count that disagrees with the data is an error; what a reader
+allocates is bounded by the file's size (a deflated ``.thair.npz`` may inflate to
+``_util.READ_EXPANSION`` times it, ``max_bytes=`` to allow more).  Every writer writes a
 temporary file in the target's directory and renames it into place.  USD files
 are read by usd-core in a child process (``isolate=False`` to read in-process),
 because usd-core can crash or exhaust memory on a corrupt binary file.

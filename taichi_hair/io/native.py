@@ -3,8 +3,10 @@
 Members: ``format_version`` (int64 scalar, currently 1), ``points``,
 ``strand_offsets`` and, when set, ``radius``, ``color``, ``region``, ``guide``,
 ``rest_points``, ``rest_twist``, ``pinned``, ``point_frames``, ``frame_times``; ``params`` is a
-JSON string, ``units`` a string.  Loading uses ``allow_pickle=False``, and every
-member's declared size is checked against the archive before it is read.
+JSON string (at most ``_util.MAX_PARAMS_DEPTH`` levels deep), ``units`` a string.  No
+member may hold Python objects, and what the members inflate to (from the archive's
+directory, before anything is read) may not exceed ``read_budget`` of the file size;
+each member is read straight into its array.
 """
 
 from __future__ import annotations
