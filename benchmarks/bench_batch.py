@@ -53,10 +53,10 @@ def main(argv=None) -> int:
     bench = Bench("batch", argv)
 
     sys.path.insert(0, ROOT)
-    from taichi_hair.cli.batch import _simulate_actions, run_argv
+    from taichi_hair.cli.batch import simulate_actions, run_argv
     from taichi_hair.scene.batch import read_batch
 
-    actions = _simulate_actions()
+    actions = simulate_actions()
     runs = read_batch(args.spec, actions)
     tmp = tempfile.mkdtemp(prefix="bench_batch_")
     try:

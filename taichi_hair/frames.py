@@ -43,11 +43,7 @@ def reference_frame_at(
     """Edge i: tangent from x[i], x[i+1], time-parallel transported reference director
     (the body's for a clamped root edge), material directors.  Nothing on ghost edges."""
     if edge.edge_rest_length[i] > 0.0:
-        e = x[i + 1] - x[i]
-        en = e.norm()
-        # An edge collapsed to (nearly) a point has no direction: it keeps its last tangent rather than
-        # turning every frame and strain of the strand into NaN (the stretch term then pulls it open).
-        t_new = e / en if en > 1e-9 * edge.edge_rest_length[i] else es.edge_tangent[i]
+        t_new = (x[i + 1] - x[i]).normalized()
         d1 = parallel_transport(es.edge_reference_director[i], es.edge_tangent[i], t_new)
         s = vertex.vertex_strand[i]
         b = strand.strand_body[s]

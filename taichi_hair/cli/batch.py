@@ -47,17 +47,21 @@ LOG_FILE = "batch.log"
 # --------------------------------------------------------------------------- runs -> simulate arguments
 def simulate_parser() -> argparse.ArgumentParser:
     """A parser of ``simulate`` alone (the same options as ``taichi-hair simulate``)."""
+    return _simulate_parsers()[0]
+
+
+def _simulate_parsers():
     from .simulate import register
 
     p = argparse.ArgumentParser(prog="taichi-hair", exit_on_error=False)
     sub = p.add_subparsers(dest="command", required=True)
     register(sub)
-    return p
+    return p, sub.choices["simulate"]
 
 
-def _simulate_actions() -> dict:
-    sp = simulate_parser()._subparsers._group_actions[0].choices["simulate"]
-    return {a.dest: a for a in sp._actions if a.option_strings}
+def simulate_actions() -> dict:
+    """simulate's options by ``dest`` name (the argparse actions a batch run's keys map to)."""
+    return {a.dest: a for a in _simulate_parsers()[1]._actions if a.option_strings}
 
 
 def _literal(v) -> str:
@@ -202,7 +206,7 @@ def cmd_batch(args) -> int:
         raise CLIError(f"{args.spec}: no such batch file")
     if args.workers < 1 or args.workers > 256:
         raise CLIError(f"--workers must be in [1, 256], got {args.workers}")
-    actions = _simulate_actions()
+    actions = simulate_actions()
     try:
         runs = read_batch(args.spec, actions)
     except SceneError as exc:

@@ -155,7 +155,7 @@ class SimulateRun:
             return
         folder = os.path.dirname(os.path.abspath(self.layout["stats"]))
         os.makedirs(folder, exist_ok=True)
-        size = frame_buffer_bytes(n, nf, itemsize) * (1 + 1 / (3 * itemsize) * self.with_contacts)
+        size = frame_buffer_bytes(n, nf, itemsize) + (nf + 1) * n * self.with_contacts  # + int8 contact states
         check_disk(2.0 * size, folder, f"the frame buffer of {nf} frames x {n:,} vertices and the frames written "
                                        "from it")
         if not self.args.quiet:
