@@ -32,24 +32,32 @@ step.  The paper has no acceleration (it suggests momentum for slow quasistatic 
 ``SolverADMMConfig.anderson_window = 0`` is the paper's plain iteration.  (Until 2026-12 theta was left
 out of u and got its Newton step from the mixed x; putting it in did not change what follows.)
 
-Not the default (``SolverADMMConfig.anderson_window = 0``): on the bend-twist validation (64 naturally
-curved rods, twist solved, 50 iterations per step; ``benchmarks/probes/anderson_bend_twist.py``, which runs
-``validation.bend_twist.run_bend_twist`` with the window forced) the plain iteration's 50 and 200
-iterations per step agree (largest vertex speed after 100 / 200 / 300 steps 4.82 / 2.26 / 1.05 and
-4.82 / 2.24 / 1.02 m/s) while window 5 gives 1.92 / 0.79 / 1.24 (50 iterations, theta mixed; 1.20 / 1.13 /
-1.18 with theta not mixed): the mixed iteration computes another motion.  What one step shows
-(``benchmarks/probes/anderson_one_step.py``: 60 plain steps, then one step from the same state with each
-method, against 3,000 plain iterations): the six worst rods are the 1.6-4.5 m ones with 120 edges, near
-their twist-bend buckling, where the plain iteration converges very slowly (3,000 and 6,000 iterations
-still differ by 5 mm) and Anderson's iterate wanders along the nearly flat direction instead of
-converging: 4.3 / 15.6 / 25.7 cm from the reference after 50 / 200 / 1,000 mixed iterations (plain 50:
-1.4 cm).  A residual-monotone restart (``ANDERSON_RESTART`` = 1) and a cap of the extrapolation at 2 or
-10 times the plain step did not make it converge (3-12 cm after 1,000).  The residual |f| is a poor
-measure of the error where the map's rate is ~1; a safeguard on the step's objective (Zhang et al. 2019
-check an energy) is the next thing to try.
-In the quasistatic mode the energy is no longer monotone (a scratch copy of
-``tests/test_solver.py::test_quasistatic_energy_decreases_monotonically`` with window 5, 6 cm rod: it rose
-by up to half the total drop on the way, reaching rest in half the steps).
+Where it runs by default (``SolverADMMConfig.anderson_window = None``, :func:`anderson_auto_window`): in the
+dynamic mode with backward Euler, on grooms whose twist unknowns are dropped (naturally straight round rods,
+``frames.twist_choice``), without contacts and with >= ``ANDERSON_MIN_ITERATIONS`` iterations per step.
+Elsewhere the plain iteration runs unless a window is given, because of what was measured there:
+
+* Twist solved (naturally curved rods): on the bend-twist validation (64 curved rods, 50 iterations per
+  step; ``benchmarks/probes/anderson_bend_twist.py``, which runs ``validation.bend_twist.run_bend_twist``
+  with the window forced) the plain iteration's 50 and 200 iterations per step agree (largest vertex speed
+  after 100 / 200 / 300 steps 4.82 / 2.26 / 1.05 and 4.82 / 2.24 / 1.02 m/s) while window 5 gives 1.92 / 0.79
+  / 1.24 (50 iterations, theta mixed; 1.20 / 1.13 / 1.18 with theta not mixed): the mixed iteration computes
+  another motion.  What one step shows (``benchmarks/probes/anderson_one_step.py``: 60 plain steps, then one
+  step from the same state with each method, against 3,000 plain iterations): the six worst rods are the
+  1.6-4.5 m ones with 120 edges, near their twist-bend buckling, where the plain iteration converges very
+  slowly (3,000 and 6,000 iterations still differ by 5 mm) and Anderson's iterate wanders along the nearly
+  flat direction instead of converging: 4.3 / 15.6 / 25.7 cm from the reference after 50 / 200 / 1,000 mixed
+  iterations (plain 50: 1.4 cm).  A residual-monotone restart (``ANDERSON_RESTART`` = 1) and a cap of the
+  extrapolation at 2 or 10 times the plain step did not make it converge (3-12 cm after 1,000).  The
+  residual |f| is a poor measure of the error where the map's rate is ~1; a safeguard on the step's
+  objective (Zhang et al. 2019 check an energy) is the next thing to try.  Twist-free rods have no
+  twist-bend coupling; there every measurement (atlas, Pareto cantilever, settling) went the plain
+  iteration's way or better.
+* The quasistatic mode: the energy is no longer monotone (a scratch copy of
+  ``tests/test_solver.py::test_quasistatic_energy_decreases_monotonically`` with window 5, 6 cm rod: it rose
+  by up to half the total drop on the way, reaching rest in half the steps).
+* BDF2: on the Pareto cantilever at 10 iterations per step the mixed BDF2 run ended 57 % off (plain BDF2
+  2.4 %); BDF2's extrapolated predictor amplifies unconverged steps (BENCHMARKS.md).
 
 Round-off: the restart and the noise floor are branches, so two implementations that differ only in
 round-off (Thomas and PCR, CPU and GPU) can take different branches and end up to the iteration's
@@ -81,8 +89,25 @@ ANDERSON_NOISE_FLOOR = 1e-5
 #: 0.04-25.6 %).  Mixing only early in a short step (the last 2-3 iterations plain), damped mixing, mixing
 #: x only and a stricter restart did not remove it; without warm-started duals it is stable but biased.
 ANDERSON_MIN_ITERATIONS = 10
+#: The window of ``SolverADMMConfig.anderson_window = None`` (auto) where it runs (module doc) [-].
+ANDERSON_DEFAULT_WINDOW = 5
 #: Tikhonov term of the least-squares normal equations, relative to their trace [-].
 ANDERSON_REGULARISATION = 1e-10
+
+
+def anderson_auto_window(window: int | None, dynamic: bool, twist_free: bool, bdf2: bool) -> tuple[int, str]:
+    """The window a solver uses for ``SolverADMMConfig.anderson_window`` (``window``), and why it is 0 when
+    it is: a given integer as it is; None (auto) ``ANDERSON_DEFAULT_WINDOW`` in the dynamic mode with
+    backward Euler on twist-free rods, else 0 (module doc, "Where it runs by default")."""
+    if window is not None:
+        return int(window), "SolverADMMConfig.anderson_window = 0"
+    if not dynamic:
+        return 0, "the quasistatic mode (the plain iteration lowers the energy monotonically)"
+    if bdf2:
+        return 0, "BDF2 (measured to amplify unconverged mixed steps)"
+    if not twist_free:
+        return 0, "the twist is solved (curved rods: measured to converge elsewhere when mixed)"
+    return ANDERSON_DEFAULT_WINDOW, ""
 
 
 class AndersonBuffers:

@@ -353,12 +353,12 @@ class SolverADMMConfig:
             W_y = w0 E_b A R^2 / (4 v^3) (Sec. 4.4) [-].  Default 1; the
             paper's value is 25 (``w0=25.0``).  Chosen by measurement
             (BENCHMARKS.md, issue 12, "Weights" and "Anderson acceleration"):
-            with Anderson acceleration (opt-in) the stability atlas (dt
+            with Anderson acceleration (the default on straight rods) the stability atlas (dt
             1/24-1/384 s x 2-50 iterations x 4 rods) has 23 of 36 cells stable
             and accurate at w0 = 1 (w0 = 2: 20 of the 24 cells with 10-50
             iterations, w0 = 5: 16 of 24); plain, 18 at w0 = 1 and 5 at w0 = 25.
             Rods clamped horizontally with drag 8/s end 2 s within
-            0.015-0.19 % of L with Anderson (plain, the default: 0.08-6.6 %; w0 = 25:
+            0.015-0.19 % of L with Anderson (plain: 0.08-6.6 %; w0 = 25:
             5-48 %; ``benchmarks/probes/admm_convergence.py settle``,
             ``weight_scale.py``); the hang scene with the same drag within
             1.8e-4 L (``benchmarks/probes/hang_settle.py``).  Too large a W_y
@@ -420,16 +420,19 @@ class SolverADMMConfig:
             ``model_choices`` says which it did and why); ``"solve"`` always
             solves them, as the paper does.
         anderson_window: Anderson acceleration of the iterations (:mod:`taichi_hair.anderson`): the
-            number of past iterates each strand extrapolates from [-]; 0 (the default) is the paper's
-            plain iteration.  Opt-in: it mixes only with at least
-            ``taichi_hair.anderson.ANDERSON_MIN_ITERATIONS`` (10) iterations per step and no contacts
-            (``contacts`` or colliders).  Measured (BENCHMARKS.md, issue 12): the atlas' rods settle in 2 s
-            to 0.015-0.19 % of L (plain 0.08-6.6 %); atlas cells with 10-50 iterations stable and accurate
-            21 of 24 (plain 16); the Pareto cantilever at 10 iterations 0.24 % against 1.9 %.  Not the
-            default: on the bend-twist validation (naturally curved rods, twist solved) it converged to a
-            different motion than the plain iteration, whose 50 and 200 iterations per step agree (max
-            speed after 100 steps 4.82 / 4.82 m/s plain, 1.20 / 0.73 m/s with window 5).  Cost ~3-25 %
-            per iteration.
+            number of past iterates each strand extrapolates from [-]; 0 is the paper's plain iteration.
+            Default None (auto): 5 in the dynamic mode with backward Euler on rods whose twist is
+            dropped (naturally straight, ``twist`` "auto"), the plain iteration in the quasistatic mode,
+            with BDF2 and where the twist is solved (curved rods), each for a measured reason
+            (``anderson.anderson_auto_window``; ``model_choices["acceleration"]`` says which ran and why).
+            It mixes only with at least ``taichi_hair.anderson.ANDERSON_MIN_ITERATIONS`` (10) iterations
+            per step and no contacts (``contacts`` or colliders).  Measured (BENCHMARKS.md, issue 12):
+            the atlas' rods settle in 2 s to 0.015-0.19 % of L (plain 0.08-6.6 %); atlas cells with
+            10-50 iterations stable and accurate 21 of 24 (plain 16); the Pareto cantilever at 10
+            iterations 0.24 % against 1.9 %.  On the bend-twist validation (curved rods, twist solved)
+            a forced window converged to a different motion than the plain iteration, whose 50 and 200
+            iterations per step agree (max speed after 100 steps 4.82 / 4.82 m/s plain, 1.20 / 0.73 m/s
+            with window 5): hence plain there.  Cost ~3-25 % per iteration.
     """
 
     iterations: int = 10
@@ -447,7 +450,7 @@ class SolverADMMConfig:
     contacts: ContactConfig | None = None
     twist: Twist = Twist.AUTO
     integrator: Integrator = Integrator.BACKWARD_EULER
-    anderson_window: int = 0
+    anderson_window: int | None = None
 
     def __post_init__(self):
         owner = "SolverADMMConfig"
@@ -470,9 +473,10 @@ class SolverADMMConfig:
             )
         self.dual_frame = as_choice(DualFrame, owner, "dual_frame", self.dual_frame)
         _check_positive("SolverADMMConfig", "w0", self.w0)
-        if not (isinstance(self.anderson_window, int) and not isinstance(self.anderson_window, bool)
+        if self.anderson_window is not None and not (
+                isinstance(self.anderson_window, int) and not isinstance(self.anderson_window, bool)
                 and 0 <= self.anderson_window <= 16):
-            raise ValueError(f"SolverADMMConfig.anderson_window must be an integer in 0..16, "
+            raise ValueError(f"SolverADMMConfig.anderson_window must be None (auto) or an integer in 0..16, "
                              f"got {self.anderson_window!r}")
         if not (isinstance(self.inertia_floor, (int, float)) and math.isfinite(self.inertia_floor)
                 and self.inertia_floor >= 0):

@@ -66,7 +66,8 @@ import taichi as ti
 
 from .solver_base import SolverBase
 from . import admm
-from .anderson import ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_begin, anderson_mix
+from .anderson import (ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_auto_window, anderson_begin,
+                       anderson_mix)
 from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
 from .fields import SolverBuffers
@@ -156,15 +157,19 @@ class SolverADMM(SolverBase):
             ccfg = cfg.contacts if cfg.contacts is not None else ContactConfig(hair_hair=False)
             self.contacts = ContactPipeline(model, ccfg, self._collider_set(colliders))
         #: Anderson acceleration of the iterations (anderson.py); not with contacts, whose projection
-        #: couples strands inside an iteration (measured only without them).
-        window = cfg.anderson_window if self.contacts is None else 0
+        #: couples strands inside an iteration (measured only without them).  anderson_window None (auto):
+        #: ANDERSON_DEFAULT_WINDOW where it was measured to converge to the plain iteration's answer
+        #: (anderson.py, "Where it runs by default"), the plain iteration elsewhere.
+        requested, why_not = anderson_auto_window(cfg.anderson_window, self.dynamic, self.twist_free,
+                                                  cfg.integrator == Integrator.BDF2)
+        window = requested if self.contacts is None else 0
         self.anderson = AndersonBuffers(model.vertex_count if window else 1,
                                         model.strand_count if window else 1, window)
         self.model_choices["acceleration"] = (
             f"Anderson acceleration, window {window}, with >= {ANDERSON_MIN_ITERATIONS} iterations per step"
             + ("" if cfg.iterations >= ANDERSON_MIN_ITERATIONS else f" (now {cfg.iterations}: plain)")
             if window else
-            "no acceleration (SolverADMMConfig.anderson_window = 0)" if cfg.anderson_window == 0 else
+            f"no acceleration: {why_not}" if requested == 0 else
             "no acceleration: not used with contacts")
         #: Statistics of the last step's contacts (see ``ContactPipeline.statistics``).
         self.contact_stats = {}

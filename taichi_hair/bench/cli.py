@@ -74,7 +74,7 @@ def register(sub) -> None:
     p.add_argument("--full", action="store_true", help="the bigger grid (longer)")
     p.add_argument("--methods", default=None,
                    help="comma-separated subset of admm (w0 = 25, plain: the paper), admm_w1 (w0 = 1, "
-                        "plain: the default), admm_aa (w0 = 1, Anderson), admm_bdf2 (w0 = 1, "
+                        "plain), admm_aa (w0 = 1, Anderson: the default on straight rods), admm_bdf2 (w0 = 1, "
                         "BDF2), admm_f64 (pareto only), shape, xpbd (default: all)")
     p.add_argument("--duration", type=float, default=None, help="stability: simulated seconds per run")
     p.add_argument("--scenes", default="cantilever,swing,groom", help="pareto: comma-separated scenes")

@@ -32,8 +32,8 @@ by 0.12 % at 1/3840 s.
 
 Methods and knobs (default grid; ``--full`` adds more):
 
-* ``admm`` (w0 = 25, the paper's), ``admm_w1`` (w0 = 1, plain: the default), ``admm_aa`` (w0 = 1,
-  Anderson acceleration from 10 iterations, opt-in) and ``admm_bdf2`` (w0 = 1, BDF2, plain): dt in
+* ``admm`` (w0 = 25, the paper's), ``admm_w1`` (w0 = 1, plain), ``admm_aa`` (w0 = 1,
+  Anderson acceleration from 10 iterations: the default on these straight rods) and ``admm_bdf2`` (w0 = 1, BDF2, plain): dt in
   {1/96, 1/384} s x iterations in {5, 10, 30};  ``admm_f64``: w0 = 1 in double precision (the precision
   knob), dt = 1/96 s, iterations in {10, 30}, run in the reference's process.
 * ``shape``: SolverShape Method 1, 2 and 3 (TressFX defaults for the shape stiffnesses) x

@@ -1,8 +1,8 @@
 """Stability atlas (issue 4, item 5): where each method is stable, stable but wrong, or unstable.
 
 For each method (``admm``: :class:`SolverADMM` with the paper's constraint weight scale
-w0 = 25 and plain iteration; ``admm_w1``: w0 = 1, plain (the default); ``admm_aa``: w0 = 1 with
-Anderson acceleration (opt-in); ``admm_bdf2``: w0 = 1, BDF2, plain
+w0 = 25 and plain iteration; ``admm_w1``: w0 = 1, plain; ``admm_aa``: w0 = 1 with
+Anderson acceleration (the default on these straight rods); ``admm_bdf2``: w0 = 1, BDF2, plain
 (:mod:`taichi_hair.bench.methods`); ``shape``: :class:`SolverShape` (TressFX),
 ``xpbd``: :class:`SolverXPBD`) we run a grid of
 
@@ -57,11 +57,11 @@ Default atlas, measured (``taichi-hair bench stability --out benchmarks/results/
 2026-12-02 13:40 UTC, commit 0e514de, 2-core VM at load ~1, f32 CPU,
 158 s; cells ok / wrong / unstable out of 36 per method):
 ``admm`` (w0 = 25, plain) 5 / 31 / 0 (never unstable, accurate only at dt = 1/384 s with 10-50
-iterations); ``admm_aa`` (w0 = 1, Anderson window 5, opt-in) 23 / 11 / 2 (ok for every rod with
+iterations); ``admm_aa`` (w0 = 1, Anderson window 5, the default on these rods) 23 / 11 / 2 (ok for every rod with
 10 and 50 iterations from dt = 1/96 s on and with 50 at 1/24 s; wrong with 2 iterations everywhere but
 1/384 s and with 10 at 1/24 s on three rods; unstable only with 2 iterations at 1/384 s on the long and
 edge-variance rods, where Anderson does not mix and the cells are the plain iteration's);
-``admm_w1`` (w0 = 1, plain, the default) 18 / 16 / 2 (at 10 iterations and
+``admm_w1`` (w0 = 1, plain) 18 / 16 / 2 (at 10 iterations and
 1/96 s the long rod does not settle and the edge-variance rod sags 12.7 % wrong; before the Woodbury
 local step it was 12 / 13 / 11, every stiff-stretch cell non-finite); ``admm_bdf2`` (w0 = 1, plain,
 BDF2) 14 / 14 / 8 (BDF2's extrapolated predictor amplifies an unconverged ADMM step: 2 iterations are

@@ -92,28 +92,34 @@ class SimulateRun:
             self.control.set_body_transform(b, R, T)
 
     def _compile(self) -> None:
-        """Compile every kernel on the real state (kernels are specialised per field), then restore it."""
+        """Compile every kernel on the real state (kernels are specialised per field), then restore it: one
+        warm-up step of whichever solver, so that ``kernel compilation`` is reported for every solver and
+        frame 1 is timed like the others."""
         from .. import SimulationDivergedError
 
         solver, state = self.solver, self.state
         self._set_bodies(0.0)
         t = time.perf_counter()
+        snapshot = state.to_numpy()
+        try:
+            # BDF2: the first step is backward Euler (no history), the second compiles the BDF2 kernels.
+            for _ in range(2 if getattr(self.scene.solver_config, "integrator", "") == "bdf2" else 1):
+                solver.step(state, self.control, self.dt)
+        except SimulationDivergedError as exc:
+            self.diverged = f"frame 1: {exc}"
+        state.load(snapshot)
         if self.admm:
-            snapshot = state.to_numpy()
-            try:
-                # BDF2: the first step is backward Euler (no history), the second compiles the BDF2 kernels.
-                for _ in range(2 if getattr(self.scene.solver_config, "integrator", "") == "bdf2" else 1):
-                    solver.step(state, self.control, self.dt)
-            except SimulationDivergedError as exc:
-                self.diverged = f"frame 1: {exc}"
-            state.load(snapshot)
             solver.reset_duals()
             if self.scene.rest_pose != "authored":
                 # The groom starts at an equilibrium: start the duals there too (SolverADMM.prime_duals).
                 solver.prime_duals(state, self.control, self.dt)
-            solver.step_count = 0
             solver.iteration_count = 0
-            solver.stage_seconds = {k: 0.0 for k in solver.stage_seconds}
+        elif hasattr(solver, "reset_collider_motion"):
+            solver.reset_collider_motion()  # SolverShape: the warm-up's body transforms are not motion
+        if hasattr(solver, "vertex_iteration_count"):
+            solver.vertex_iteration_count = 0
+        solver.step_count = 0
+        solver.stage_seconds = {k: 0.0 for k in solver.stage_seconds}
         self.t_compile = time.perf_counter() - t
 
     def _resume(self) -> None:
