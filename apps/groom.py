@@ -71,6 +71,9 @@ class GroomApp:
         self.tool = "select"
         self.color_mode = "region"
         self.message = "ready"
+        #: Frames drawn and frames with a simulation step, since the window opened [-].
+        self.frames_drawn = 0
+        self.frames_simulated = 0
         self.frame_ms = 0.0
         self.sim_ms = 0.0
         self._error_cache = None
@@ -293,15 +296,27 @@ class GroomApp:
         self.viewer.set_points(pinned, radius=0.004 * self.size)
 
     def frame(self) -> None:
-        """One displayed frame: a quasistatic step of the session (if on), then draw."""
+        """One displayed frame: a quasistatic step of the session (if on), then draw.
+
+        The very first frame only draws: the first step builds the simulation and loads or compiles its
+        kernels (~8 s with a warm kernel cache on 2 CPU cores, measured), and the groom should be on screen,
+        with a message saying so, before that happens."""
         t0 = time.perf_counter()
-        if self.session.simulating:
+        first = self.frames_drawn == 0
+        if self.session.simulating and not first:
             self.session.advance(1)
+            if self.frames_simulated == 0:
+                print("first simulated frame", flush=True)
+                self.message = "ready"
+            self.frames_simulated += 1
+        elif self.session.simulating:
+            self.message = "building the simulation (kernels compile on first use)..."
         t1 = time.perf_counter()
         self.update_view()
         self.viewer.render()
         self.sim_ms = 1e3 * (t1 - t0)
         self.frame_ms = 1e3 * (time.perf_counter() - t0)
+        self.frames_drawn += 1
 
 
 def _interpolation_error(session) -> np.ndarray:

@@ -195,11 +195,11 @@ class MeshCollider:
             raise ValueError(f"MeshCollider.mesh ({source}) is degenerate (zero extent)")
         center = 0.5 * (lo + hi)
         half = 0.5 * side * (1.0 + 2.0 * self.padding)
-        import mesh2sdf
+        from .sdf_cache import mesh_sdf_grid
 
         n = self.resolution
         normalized = (v - center) / half  # in [-1, 1]
-        sdf = mesh2sdf.compute(normalized, np.asarray(mesh.faces, np.int64), n, fix=False, level=2.0 / n)
+        sdf = mesh_sdf_grid(normalized, np.asarray(mesh.faces, np.int64), n, 2.0 / n)  # mesh2sdf, cached on disk
         sdf = np.asarray(sdf, np.float64) * half
         if not self.watertight:
             sdf = self._sign_open_mesh(mesh, np.abs(sdf), center - half, 2.0 * half / n)

@@ -115,7 +115,7 @@ class ScalpSurface:
 
 def _voxel_sdf(vertices, faces, resolution: int, name: str):
     """Trilinear sampler of a mesh2sdf voxel SDF over the padded bounding box (far outside: distance to the box)."""
-    import mesh2sdf
+    from ..contact.sdf_cache import mesh_sdf_grid
 
     lo, hi = vertices.min(0), vertices.max(0)
     side = float((hi - lo).max())
@@ -124,8 +124,7 @@ def _voxel_sdf(vertices, faces, resolution: int, name: str):
     center = 0.5 * (lo + hi)
     half = 0.5 * side * 1.3
     n = resolution
-    grid = np.asarray(mesh2sdf.compute((vertices - center) / half, faces, n, fix=False, level=2.0 / n),
-                      np.float64) * half
+    grid = np.asarray(mesh_sdf_grid((vertices - center) / half, faces, n, 2.0 / n), np.float64) * half
     origin = center - half
     h = 2.0 * half / n  # grid point i sits at origin + i h (mesh2sdf's convention, see contact/colliders.py)
 
