@@ -48,7 +48,10 @@ Elsewhere the plain iteration runs unless a window is given, because of what was
   slowly (3,000 and 6,000 iterations still differ by 5 mm) and Anderson's iterate wanders along the nearly
   flat direction instead of converging: 4.3 / 15.6 / 25.7 cm from the reference after 50 / 200 / 1,000 mixed
   iterations (plain 50: 1.4 cm).  A residual-monotone restart (``ANDERSON_RESTART`` = 1) and a cap of the
-  extrapolation at 2 or 10 times the plain step did not make it converge (3-12 cm after 1,000).  The
+  extrapolation at 2 or 10 times the plain step did not make it converge (3-12 cm after 1,000); nor did Zhang
+  et al.'s revert (2026-12-04, a scratch patch: a mixed iterate whose |f| is not below the last accepted one is
+  replaced by the last accepted plain iterate and the history restarts there; 4.0 / 4.0 / 35 cm after 50 / 200 /
+  1,000 iterations, plain 50: 1.5 cm).  The
   residual |f| is a poor measure of the error where the map's rate is ~1; a safeguard on the step's
   objective (Zhang et al. 2019 check an energy) is the next thing to try.  Twist-free rods have no
   twist-bend coupling; there every measurement (atlas, Pareto cantilever, settling) went the plain
