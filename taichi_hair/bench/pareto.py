@@ -49,21 +49,24 @@ The measured data are copied to ``taichi_hair/bench/data/pareto_cpu.csv`` (with 
 ``pareto_cpu.json``) so that the method choice of issue 4 item 6 can read them;
 ``taichi-hair bench pareto --out DIR --update-data`` re-measures and replaces them.
 
-Findings, honestly (default grid, ``taichi-hair bench pareto --out benchmarks/results/pareto
---update-data``, 2026-12-02, issue 12's defaults, 2-core VM shared with other sessions at load 1-4, so costs
-are noisy by up to ~2x; 1,075 s in all, 320 s of it the groom reference; errors at 10 iterations):
+Findings, honestly (default grid, ``taichi-hair bench pareto --out benchmarks/results/pareto``, commit
+c7c25fa, 2026-12-03 22:19-22:25 UTC, the current defaults (Anderson mixing on straight rods without contacts),
+2-core VM, load 0.0 at the start, 364 s in all, 189 s of it the groom reference; the shipped
+``data/pareto_cpu.csv`` is this run's ``pareto.csv``; costs are one run each and noisy by up to ~2x; errors at
+10 iterations):
 
-* ``cantilever`` (analytic error): ADMM with w0 = 1 owns the front: 1.9 % at dt = 1/96 s, 0.17 % at
-  1/384 s; BDF2 2.4 % at 1/96 s; the paper's w0 = 25 52 % at 1/96 s (it has not settled in 1.5 s), 2.3 %
-  at 1/384 s with 30 iterations.  SolverShape and XPBD stay at 60-80 % of L (no bending stiffness /
-  too few substeps).
+* ``cantilever`` (analytic error; straight rods, so the default mixes): ``admm_aa`` 0.25 % at dt = 1/96 s
+  (0.13 % with 30 iterations, the best point), the plain w0 = 1 iteration 1.9 % (0.17 % at 1/384 s with
+  30), BDF2 2.4 %, the paper's w0 = 25 52 % (it has not settled in 1.5 s).  SolverShape and XPBD are at
+  best 76 % and 80 % of L off (no bending stiffness / too few substeps).
 * ``swing`` (reference self-difference 0.57 %): BDF2 owns the front: 3.1 % at dt = 1/96 s, 0.57 % at
-  1/384 s with 30 iterations, against backward Euler's 9.7 % and 4.2 % (w0 = 1; its numerical damping of
-  the swing, a time-step error that no iteration count removes) and XPBD's 2.7 % with 80 substeps per
-  1/96 s step at 4x BDF2's cost at 1/96 s.
-* ``groom`` (reference self-difference 3.5 %, so errors below ~4 % cannot be told apart): SolverShape at
-  the cheap end (68 %), ADMM w0 = 1 at 1/96 s with 5 iterations (16 %), then BDF2: 7.7 % at 1/96 s,
-  5.9 % at 1/384 s; backward Euler w0 = 1 16 % / 8.9 %, XPBD 7.9 % with 80 substeps.
+  1/384 s with 30 iterations, against backward Euler's 9.5 % (``admm_aa``) / 9.7 % (plain) and 4.2 % at
+  1/384 s (its numerical damping of the swing, a time-step error that no iteration count removes), and
+  XPBD's 2.7 % with 80 substeps per 1/96 s step.
+* ``groom`` (wavy strands, so the twist is solved and the default runs plain; reference self-difference
+  3.9 %, so errors below ~4 % cannot be told apart): SolverShape at the cheap end (51 %), plain ADMM at
+  1/96 s with 5 iterations (16 %), then BDF2: 8.3 % at 1/96 s, 6.2 % at 1/384 s; backward Euler 16.2 %
+  (plain) / 15.5 % (``admm_aa`` forced), XPBD 8.3 % with 80 substeps.
 * The precision knob: ADMM in f64 gives the same errors as f32 at the same knobs (f32 is not the limit).
 * The default integrator stays backward Euler: BDF2 is unstable with 2 iterations and, on uneven edges,
   with 10 iterations at dt = 1/96 s (:mod:`taichi_hair.bench.stability`); ``--max-error`` method choice
