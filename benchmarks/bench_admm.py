@@ -9,10 +9,12 @@
 2. One 10 cm hair rod of 40 edges clamped horizontally (Gamma = 6.8): wall
    time of the quasistatic ADMM to bring the tip height within 0.1 % of its
    final value, side by side with MuJoCo's cable (benchmarks/mujoco_cable.py)
-   in the same run.  Kernel compilation is reported apart.
+   in the same run, and of the direct static solve (``taichi_hair.solvers.static_newton``: Gauss-Newton,
+   banded Cholesky, every iteration in one launch) to the same 0.1 % and to its 1e-10 m tolerance.  Kernel
+   compilation is reported apart.
 
 Usage:
-    python benchmarks/bench_admm.py [--arch cpu|cuda] [--sizes 1000x32,10000x32,1000x128] [--out FILE]
+    python benchmarks/bench_admm.py [--arch cpu|cuda] [--sizes 1000x32,10000x32,1000x128] [--rod-only] [--out FILE]
 
 Figures are printed and written as JSON (default benchmarks/results/admm_<arch>.json).
 """
@@ -118,6 +120,49 @@ def rod_to_rest(th, ti, w0=0.2, chunk=10, rel_tol=1e-3, schedule="auto", anderso
             "iterations_per_call": chunk, "anderson_window": solver.anderson.window}
 
 
+def rod_to_rest_newton(th, ti, rel_tol=1e-3, repeats=51):
+    """The direct static solve (taichi_hair.solvers.static_newton) on the same 10 cm rod: the Gauss-Newton
+    iterations until the tip height stays within rel_tol of its converged value (found untimed, as the ADMM's
+    chunks and MuJoCo's steps are), then the wall time of one solve with exactly that many iterations (one
+    kernel launch; median of ``repeats``), and of the solve to its default tolerance (1e-10 m)."""
+    from taichi_hair.solvers.static_newton import SolverStaticNewton, StaticNewtonConfig
+
+    n, L = 41, 0.1
+    b = th.GroomBuilder()
+    b.add_strand(np.c_[np.linspace(0, L, n), np.zeros(n), np.zeros(n)], th.RodMaterial())
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    x0 = st.vertex_position.to_numpy().astype(np.float64)
+    solver = SolverStaticNewton(model)
+    t0 = time.perf_counter()
+    x, full = solver.solve_to(x0, ctl.gravity)
+    compile_s = time.perf_counter() - t0
+    final = float(x[-1, 1])
+    needed = int(full.iterations[0])
+    for k in range(1, needed + 1):
+        solver.config = StaticNewtonConfig(max_iterations=k)
+        xk, _ = solver.solve_to(x0, ctl.gravity)
+        if abs(xk[-1, 1] / final - 1.0) <= rel_tol:
+            needed = k
+            break
+
+    def wall(max_iterations):
+        solver.config = StaticNewtonConfig(max_iterations=max_iterations)
+        ts = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            xr, _ = solver.solve_to(x0, ctl.gravity)
+            ts.append(time.perf_counter() - t)
+        return float(np.median(ts)), float(min(ts)), float(xr[-1, 1])
+
+    wall_s, wall_min, tip = wall(needed)
+    conv_s, conv_min, _ = wall(200)
+    return {"iterations": needed, "wall_s": wall_s, "wall_s_min": wall_min, "tip_drop_m_after_timed_run": -tip,
+            "final_tip_drop_m": -final, "iterations_to_tolerance": int(full.iterations[0]),
+            "wall_s_to_tolerance": conv_s, "wall_s_to_tolerance_min": conv_min, "compile_s": compile_s,
+            "converged": bool(full.converged[0])}
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--arch", default="cpu")
@@ -126,6 +171,7 @@ def main(argv=None):
     p.add_argument("--no-mujoco", action="store_true")
     p.add_argument("--anderson", default=None,
                    help="comma-separated Anderson windows to compare in one run (default: the solver's default)")
+    p.add_argument("--rod-only", action="store_true", help="only the rod-to-rest comparison (no throughput runs)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     bench = Bench("admm", argv)
@@ -139,7 +185,7 @@ def main(argv=None):
     print(f"SolverADMM benchmark on {arch} ({os.cpu_count()} cores), taichi {ti.__version__}")
     windows = [None] if args.anderson is None else [int(w) for w in args.anderson.split(",")]
     print(f"{'strands x verts':>16} {'anderson':>8} {'ms/iter':>9} {'Mvert-it/s':>11} {'compile s':>10}  stage ms/iter")
-    for size in args.sizes.split(","):
+    for size in ([] if args.rod_only else args.sizes.split(",")):
         ns, nv = (int(v) for v in size.split("x"))
         for w in windows:
             r = throughput(th, ti, ns, nv, schedule=args.schedule, anderson=w)
@@ -155,6 +201,12 @@ def main(argv=None):
               f"{rest['anderson_window']}): {rest['iterations']} iterations, {1e3 * rest['wall_s']:.2f} ms wall "
               f"(compile {rest['compile_s']:.2f} s), tip drop {1e3 * rest['final_tip_drop_m']:.3f} mm", flush=True)
     out["rod_to_rest"] = rest
+    newton = rod_to_rest_newton(th, ti)
+    out["rod_to_rest_static_newton"] = newton
+    print(f"10 cm rod, static Newton solve (solvers/static_newton.py): {newton['iterations']} Gauss-Newton iterations "
+          f"to 0.1%, {1e3 * newton['wall_s']:.3f} ms wall (min {1e3 * newton['wall_s_min']:.3f}); to 1e-10 m "
+          f"{newton['iterations_to_tolerance']} iterations, {1e3 * newton['wall_s_to_tolerance']:.3f} ms "
+          f"(compile {newton['compile_s']:.2f} s), tip drop {1e3 * newton['final_tip_drop_m']:.3f} mm", flush=True)
     if not args.no_mujoco:
         try:
             import mujoco_cable  # benchmarks/mujoco_cable.py (the script's folder is on sys.path)
@@ -163,7 +215,8 @@ def main(argv=None):
             out["mujoco_rod_to_rest"] = mj
             print(f"MuJoCo cable, same rod: {mj['steps']} steps, {1e3 * mj['wall_s']:.2f} ms wall "
                   f"(compile {1e3 * mj['compile_s']:.1f} ms), tip drop {1e3 * mj['final_tip_drop_m']:.3f} mm; "
-                  f"ratio ADMM/MuJoCo wall time = {rest['wall_s'] / mj['wall_s']:.1f}")
+                  f"ratio ADMM/MuJoCo wall time = {rest['wall_s'] / mj['wall_s']:.1f}, static Newton/MuJoCo "
+                  f"{newton['wall_s'] / mj['wall_s']:.3f} (to 1e-10 m: {newton['wall_s_to_tolerance'] / mj['wall_s']:.3f})")
         except ImportError as exc:
             print(f"MuJoCo comparison skipped: {exc}")
     path = bench.write(args.out or results_path(f"admm_{arch}.json"), out)

@@ -212,7 +212,8 @@ def test_slow_continuous_passes_skipped_within_tolerance():
 # --------------------------------------------------------------------------- equilibrium
 def test_equilibrium_matches_a_long_damped_dynamic_run():
     """Four 10 cm horizontal cantilevers: the quasistatic equilibrium (estimated 1 um tolerance) and a 3 s
-    dynamic run with strong air drag come to rest within 10 um of each other (measured 1.2 um)."""
+    dynamic run with strong air drag come to rest within 10 um of each other (measured 1.2 um); so does the
+    static Newton solve that equilibrium() picks by itself on these straight rods."""
     from taichi_hair.config import SolverADMMConfig
     from taichi_hair.solvers.equilibrium import equilibrium
     from taichi_hair.solver_admm import SolverADMM
@@ -221,15 +222,20 @@ def test_equilibrium_matches_a_long_damped_dynamic_run():
     st, ctl = model.state(), model.control()
     ctl.gravity = (0.0, -9.81, 0.0)
     solver = SolverADMM(model, SolverADMMConfig(iterations=10, mode="quasistatic", w0=1.0))
-    r = equilibrium(solver, st, ctl, 1e-6, 3000)
-    assert r.converged and r.estimated_distance < 1e-6
+    r = equilibrium(solver, st, ctl, 1e-6, 3000, method="admm")
+    assert r.converged and r.estimated_distance < 1e-6 and r.method == "admm"
     x_eq = st.positions().astype(np.float64)
+    st_newton = model.state()
+    r = equilibrium(solver, st_newton, ctl, 1e-6)
+    assert r.converged and r.method == "static Newton"
+    x_newton = st_newton.positions().astype(np.float64)
     rho_a = 1300 * np.pi * (5e-5) ** 2
     st2, solver2 = _run(model, SolverADMMConfig(iterations=10, w0=1.0, air_viscosity=20 * rho_a), 288, nod=False)
     x_dyn = st2.positions().astype(np.float64)
     assert np.max(np.abs(st2.vertex_velocity.to_numpy())) < 1e-4     # at rest
     assert np.max(x_eq[:, 1]) - np.min(x_eq[:, 1]) > 0.01             # sagged by centimetres
     assert np.max(np.linalg.norm(x_eq - x_dyn, axis=1)) < 1e-5
+    assert np.max(np.linalg.norm(x_newton - x_dyn, axis=1)) < 1e-5
 
 
 def test_equilibrium_refuses_a_dynamic_solver_and_reports_non_convergence():
@@ -242,7 +248,7 @@ def test_equilibrium_refuses_a_dynamic_solver_and_reports_non_convergence():
     with pytest.raises(ValueError, match="quasistatic"):
         equilibrium(SolverADMM(model, SolverADMMConfig()), st, ctl, 1e-6)
     solver = SolverADMM(model, SolverADMMConfig(mode="quasistatic", iterations=2))
-    r = equilibrium(solver, st, ctl, 1e-9, max_steps=3)
+    r = equilibrium(solver, st, ctl, 1e-9, max_steps=3, method="admm")
     assert not r.converged and r.steps == 3 and r.last_displacement > 1e-9
 
 

@@ -331,7 +331,8 @@ def register(sub) -> None:
     s.add_argument("--profile", action="store_true", help="time each stage of Algorithm 1 (synchronises after each)")
     s.add_argument("--equilibrium", action="store_true",
                    help="only the rest shape: quasistatic ADMM steps until the largest displacement per step is "
-                        "below --equilibrium-tolerance; written as frame 1")
+                        "below --equilibrium-tolerance, or, without contacts on straight round strands, one step and a "
+                        "direct static Newton solve of the same energy; written as frame 1")
     s.add_argument("--equilibrium-tolerance", type=float, default=1e-5, metavar="M",
                    help="--equilibrium: estimated distance left to the equilibrium [m] (default 1e-5)")
     s.add_argument("--max-steps", type=int, default=2000,

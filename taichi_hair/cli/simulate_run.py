@@ -368,7 +368,7 @@ class SimulateRun:
             summary["equilibrium"] = dict(converged=eq.converged, steps=eq.steps, iterations=eq.iterations,
                                           last_displacement_m=eq.last_displacement,
                                           estimated_distance_m=eq.estimated_distance,
-                                          tolerance_m=args.equilibrium_tolerance)
+                                          tolerance_m=args.equilibrium_tolerance, method=eq.method)
         rows = self.stats_rows
         if self.with_contacts and rows:
             summary["mean_contacts"] = float(np.mean([r["contacts"] for r in rows]))
@@ -410,7 +410,9 @@ class SimulateRun:
                       f"{eq.last_displacement:.3g} m, estimated distance left {eq.estimated_distance:.3g} m, "
                       f"tolerance {args.equilibrium_tolerance:g} m); the last state was written", file=sys.stderr)
                 return 1
-            print(f"equilibrium after {eq.steps} quasistatic steps ({eq.iterations} iterations; last displacement "
+            how = (f"{eq.steps} quasistatic step and a static Newton solve" if eq.method == "static Newton" else
+                   f"{eq.steps} quasistatic steps")
+            print(f"equilibrium after {how} ({eq.iterations} iterations; last displacement "
                   f"{eq.last_displacement:.3g} m, estimated distance left {eq.estimated_distance:.3g} m)")
         if failed and args.strict:
             print(f"error: --strict: {'; '.join(failed)}", file=sys.stderr)

@@ -4,7 +4,9 @@ drivers that step any solver.
 * :mod:`.shape`: :class:`SolverShape`, Han & Harada's TressFX-style solver (Verlet, global and local
   shape constraints, edge lengths);
 * :mod:`.xpbd`: :class:`SolverXPBD`, extended position-based dynamics on Cosserat rods (a baseline);
-* :mod:`.equilibrium`: quasistatic stepping to an equilibrium.
+* :mod:`.equilibrium`: quasistatic stepping to an equilibrium;
+* :mod:`.static_newton`: :class:`SolverStaticNewton`, the direct static solve of the same energy for strands
+  without contacts whose twist can be dropped (what :mod:`.equilibrium` uses there).
 """
 
 from __future__ import annotations
