@@ -10,8 +10,8 @@ steps 1,000 and 3,000 (ADMM's fixed point does not depend on w0; its speed does)
 Same equilibrium as a long damped dynamic run, within the tolerance of the tests.
 
 Few rods, or any number without contacts (issue 15, item 3): when the scene has no contacts and the static
-solve models it exactly (:func:`taichi_hair.solvers.static_newton.static_newton_eligibility`: Korner strain,
-twist dropped, no sag-free rest moments), ``method="auto"`` (the default) minimises the same energy directly
+solve models it exactly (:func:`taichi_hair.solvers.static_newton.static_newton_eligibility`: the Korner
+strain), ``method="auto"`` (the default) minimises the same energy directly
 with :class:`~taichi_hair.solvers.static_newton.SolverStaticNewton` (Gauss-Newton, every iteration in one
 launch) after one quasistatic step that puts the roots on their bodies: the 10 cm rod of
 ``benchmarks/bench_admm.py`` in 11 Gauss-Newton iterations (0.2 ms) where the quasistatic ADMM takes 1,020
@@ -49,7 +49,7 @@ def static_solve_choice(solver) -> tuple[bool, str]:
     from .static_newton import static_newton_eligibility
 
     ok, why = static_newton_eligibility(solver.model, solver.config)
-    return (True, "static Newton solve (no contacts, twist dropped)") if ok else (False, f"quasistatic ADMM: {why}")
+    return (True, "static Newton solve (no contacts)") if ok else (False, f"quasistatic ADMM: {why}")
 
 
 def _static_equilibrium(solver, state, control, tolerance: float, dt: float, callback) -> EquilibriumResult:
