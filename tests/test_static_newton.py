@@ -173,6 +173,10 @@ def test_static_solve_with_the_twist_lands_on_the_quasistatic_admm_equilibrium_o
     e = np.diff(x_newton, axis=0, append=x_newton[-1:])[real]
     t = st2.edge_tangent.to_numpy()[real]
     assert np.max(np.abs(t - e / np.linalg.norm(e, axis=1)[:, None])) < 1e-6
+    # equilibrium(): "auto" steps the ADMM here (the twist is solved), "newton" takes the static solve.
+    from taichi_hair.solvers.equilibrium import static_solve_choice
+
+    assert not static_solve_choice(admm)[0] and static_solve_choice(admm, "newton")[0]
 
 
 def test_static_solve_refuses_what_it_does_not_model(taichi_cpu):

@@ -11,11 +11,14 @@ Same equilibrium as a long damped dynamic run, within the tolerance of the tests
 
 Few rods, or any number without contacts (issue 15, item 3): when the scene has no contacts and the static
 solve models it exactly (:func:`taichi_hair.solvers.static_newton.static_newton_eligibility`: the Korner
-strain), ``method="auto"`` (the default) minimises the same energy directly
+strain) and the twist is dropped (straight round strands), ``method="auto"`` (the default) minimises the
+same energy directly
 with :class:`~taichi_hair.solvers.static_newton.SolverStaticNewton` (Gauss-Newton, every iteration in one
 launch) after one quasistatic step that puts the roots on their bodies: the 10 cm rod of
 ``benchmarks/bench_admm.py`` in 11 Gauss-Newton iterations (0.2 ms) where the quasistatic ADMM takes 1,020
-iterations (121 ms).  ``method="admm"`` keeps the stepping.
+iterations (121 ms).  ``method="newton"`` takes it for curved strands too (the twist as unknowns: the
+hang scene's 300 curly strands in 3.5 s against 13 s of stepping, but ~25 s of kernel compilation for every
+new groom size); ``method="admm"`` keeps the stepping.
 """
 
 from __future__ import annotations
@@ -42,14 +45,22 @@ class EquilibriumResult:
 RATE_WINDOW = 10
 
 
-def static_solve_choice(solver) -> tuple[bool, str]:
-    """Whether :func:`equilibrium`'s ``method="auto"`` solves ``solver``'s scene directly, and why (not)."""
+def static_solve_choice(solver, method: str = "auto") -> tuple[bool, str]:
+    """Whether :func:`equilibrium` with ``method`` ("auto" or "newton") solves ``solver``'s scene directly, and
+    why (not).  "auto" takes the static solve only where the twist is dropped: with the twist as unknowns its
+    kernel took ~25 s to compile for every new groom size (Taichi's cache keys on the fields), more than the
+    stepping it saves on a first run (BENCHMARKS.md); "newton" takes it wherever it models the scene."""
     if solver.contacts is not None:
         return False, "contacts (hair-hair or bodies): quasistatic ADMM"
     from .static_newton import static_newton_eligibility
+    from .static_newton_config import static_newton_twist
 
     ok, why = static_newton_eligibility(solver.model, solver.config)
-    return (True, "static Newton solve (no contacts)") if ok else (False, f"quasistatic ADMM: {why}")
+    if not ok:
+        return False, f"quasistatic ADMM: {why}"
+    if method == "auto" and static_newton_twist(solver.model, solver.config):
+        return False, "quasistatic ADMM: the twist is solved (the static solve is method='newton' there)"
+    return True, "static Newton solve (no contacts)"
 
 
 def _static_equilibrium(solver, state, control, tolerance: float, dt: float, callback) -> EquilibriumResult:
@@ -84,18 +95,23 @@ def equilibrium(solver, state, control, tolerance: float, max_steps: int = 2000,
     :data:`RATE_WINDOW` steps, as the geometric tail d_k r / (1 - r); the run stops when that estimate and
     d_k are both below ``tolerance`` (an estimate: it assumes the linear convergence ADMM shows near the
     solution).  ``callback(step, displacement)`` is called after each step (progress bars).  ``method``:
-    "auto" (the static Newton solve where :func:`static_solve_choice` allows it, the stepping elsewhere) or
-    "admm" (the stepping); with the static solve ``steps`` is 1 and ``iterations`` counts that step's ADMM
-    iterations plus the most Gauss-Newton iterations of a strand.
+    "auto" (the static Newton solve where :func:`static_solve_choice` takes it, the stepping elsewhere),
+    "newton" (the static solve wherever it models the scene, else a ValueError) or "admm" (the stepping);
+    with the static solve ``steps`` is 1 and ``iterations`` counts that step's ADMM iterations plus the most
+    Gauss-Newton iterations of a strand.
     """
     if solver.config.mode != Mode.QUASISTATIC:
         raise ValueError("equilibrium: the solver must be in the quasistatic mode (SolverADMMConfig.mode)")
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"equilibrium: tolerance must be a finite positive length [m], got {tolerance!r}")
-    if method not in ("auto", "admm"):
-        raise ValueError(f"equilibrium: method must be 'auto' or 'admm', got {method!r}")
-    if method == "auto" and static_solve_choice(solver)[0]:
-        return _static_equilibrium(solver, state, control, tolerance, dt, callback)
+    if method not in ("auto", "admm", "newton"):
+        raise ValueError(f"equilibrium: method must be 'auto', 'admm' or 'newton', got {method!r}")
+    if method != "admm":
+        ok, why = static_solve_choice(solver, method)
+        if ok:
+            return _static_equilibrium(solver, state, control, tolerance, dt, callback)
+        if method == "newton":
+            raise ValueError(f"equilibrium: method='newton' does not apply: {why}")
     prev = state.vertex_position.to_numpy().astype(np.float64)
     history = []
     disp, left = math.inf, math.inf

@@ -51,6 +51,17 @@ __all__ = ["SolverStaticNewton", "StaticNewtonConfig", "StaticNewtonResult", "st
 vec3d = ti.types.vector(3, ti.f64)
 mat3d = ti.types.matrix(3, 3, ti.f64)
 
+#: Smallest field capacities [vertices], [strands] (see SolverStaticNewton.__init__).
+MIN_VERTEX_CAPACITY, MIN_STRAND_CAPACITY = 1024, 64
+#: Header of the kernel's io array: n, ns, max_iterations, tolerance, line_search_steps, g (3).
+HEADER = 8
+
+
+def _capacity(count: int, least: int) -> int:
+    """The power of two >= count, at least ``least``."""
+    return max(least, 1 << max(0, int(count) - 1).bit_length())
+
+
 #: Band storage columns: the half-bandwidth in unknowns of the twist-solved form (4 x 2 + 3) plus the diagonal.
 BAND_COLUMNS = 12
 
@@ -119,39 +130,50 @@ class SolverStaticNewton:
         pinned[:, :3] = np.asarray(h["vertex_is_fixed"], np.int32)[:, None]
         if self.twist:
             pinned[:, 3] = ((np.asarray(h["edge_is_fixed"]) != 0) | ghost).astype(np.int32)
+        # Taichi compiles a kernel for the shapes of the fields it reads, and its offline cache keys on them: the
+        # fields are allocated at a capacity (vertices and strands rounded up to a power of two), so that grooms of
+        # similar size share one compiled kernel (the twist form took ~30 s to compile for every new vertex count).
+        cap_v, cap_s = _capacity(n, MIN_VERTEX_CAPACITY), _capacity(ns, MIN_STRAND_CAPACITY)
         # Per pair / edge / vertex [SI]: S_i (n, 3) (0 where inactive), kappa_bar_i (n, 3), stretch stiffness and
         # rest length of edge i (0 on the ghost edge after a strand's tip), mass; per unknown: pinned (0 / 1).
-        self.pair_stiffness = ti.Vector.field(3, ti.f64, n)
-        self.pair_rest_kappa = ti.Vector.field(3, ti.f64, n)
-        self.edge_stiffness = ti.field(ti.f64, n)
-        self.edge_length = ti.field(ti.f64, n)
-        self.vertex_mass = ti.field(ti.f64, n)
-        self.dof_pinned = ti.field(ti.i32, self.D * n)
-        self.strand_start = ti.field(ti.i32, ns)
-        self.strand_count = ti.field(ti.i32, ns)
+        self.pair_stiffness = ti.Vector.field(3, ti.f64, cap_v)
+        self.pair_rest_kappa = ti.Vector.field(3, ti.f64, cap_v)
+        self.edge_stiffness = ti.field(ti.f64, cap_v)
+        self.edge_length = ti.field(ti.f64, cap_v)
+        self.vertex_mass = ti.field(ti.f64, cap_v)
+        self.dof_pinned = ti.field(ti.i32, self.D * cap_v)
+        self.strand_start = ti.field(ti.i32, cap_s)
+        self.strand_count = ti.field(ti.i32, cap_s)
         # Work arrays: positions, twists and edge frames (tangent, reference director) of the iterate and of the
         # trial [m, rad, -]; the material directors of the point being evaluated; the band of the lower Cholesky
         # factor (D n, BAND_COLUMNS): band[j, k] = A[j, j - k]; -grad E and the step (D n).
-        self.x = ti.Vector.field(3, ti.f64, n)
-        self.x_trial = ti.Vector.field(3, ti.f64, n)
-        self.theta = ti.field(ti.f64, n)
-        self.theta_trial = ti.field(ti.f64, n)
-        self.edge_t = ti.Vector.field(3, ti.f64, n)
-        self.edge_ref = ti.Vector.field(3, ti.f64, n)
-        self.frame_t = ti.Vector.field(3, ti.f64, n)
-        self.frame_m1 = ti.Vector.field(3, ti.f64, n)
-        self.frame_m2 = ti.Vector.field(3, ti.f64, n)
-        self.band = ti.field(ti.f64, (self.D * n, BAND_COLUMNS))
-        self.rhs = ti.field(ti.f64, self.D * n)
-        self.step = ti.field(ti.f64, self.D * n)
-        self.pair_stiffness.from_numpy(bend)
-        self.pair_rest_kappa.from_numpy(kbar)
-        self.edge_stiffness.from_numpy(np.asarray(h["edge_stretch_stiffness"], np.float64))
-        self.edge_length.from_numpy(np.asarray(h["edge_rest_length"], np.float64))
-        self.vertex_mass.from_numpy(np.asarray(h["vertex_mass"], np.float64))
-        self.dof_pinned.from_numpy(pinned.reshape(-1))
-        self.strand_start.from_numpy(np.asarray(h["strand_vertex_start"], np.int32))
-        self.strand_count.from_numpy(np.asarray(h["strand_vertex_count"], np.int32))
+        self.x = ti.Vector.field(3, ti.f64, cap_v)
+        self.x_trial = ti.Vector.field(3, ti.f64, cap_v)
+        self.theta = ti.field(ti.f64, cap_v)
+        self.theta_trial = ti.field(ti.f64, cap_v)
+        self.edge_t = ti.Vector.field(3, ti.f64, cap_v)
+        self.edge_ref = ti.Vector.field(3, ti.f64, cap_v)
+        self.frame_t = ti.Vector.field(3, ti.f64, cap_v)
+        self.frame_m1 = ti.Vector.field(3, ti.f64, cap_v)
+        self.frame_m2 = ti.Vector.field(3, ti.f64, cap_v)
+        self.band = ti.field(ti.f64, (self.D * cap_v, BAND_COLUMNS))
+        self.rhs = ti.field(ti.f64, self.D * cap_v)
+        self.step = ti.field(ti.f64, self.D * cap_v)
+
+        def padded(a, cap):
+            a = np.asarray(a)
+            out = np.zeros((cap,) + a.shape[1:], a.dtype)
+            out[:a.shape[0]] = a
+            return out
+
+        self.pair_stiffness.from_numpy(padded(bend, cap_v))
+        self.pair_rest_kappa.from_numpy(padded(kbar, cap_v))
+        self.edge_stiffness.from_numpy(padded(np.asarray(h["edge_stretch_stiffness"], np.float64), cap_v))
+        self.edge_length.from_numpy(padded(np.asarray(h["edge_rest_length"], np.float64), cap_v))
+        self.vertex_mass.from_numpy(padded(np.asarray(h["vertex_mass"], np.float64), cap_v))
+        self.dof_pinned.from_numpy(padded(pinned, cap_v).reshape(-1))
+        self.strand_start.from_numpy(padded(np.asarray(h["strand_vertex_start"], np.int32), cap_s))
+        self.strand_count.from_numpy(padded(np.asarray(h["strand_vertex_count"], np.int32), cap_s))
         self._rest_frames = (np.asarray(h["edge_rest_tangent"], np.float64),
                              np.asarray(h["edge_rest_director"], np.float64),
                              np.asarray(h["edge_rest_twist"], np.float64))
@@ -400,30 +422,29 @@ class SolverStaticNewton:
     def _solve(self, serial: ti.template(), io: ti.types.ndarray(dtype=ti.f64, ndim=1)):
         """Every Gauss-Newton iteration of every strand, in one launch.  ``io`` packs everything that goes in
         and out (one array argument: each further argument costs ~10 us of launch on the 2-core VM, more than
-        an iteration): positions (3n) [m], edge tangents (3n), reference directors (3n) and twists (n) [rad]
-        in and out (the frames read and written with the twist only); per strand (5 ns) iterations, converged
-        (0 / 1), last and previous moves [m] and energy [J] out; max_iterations, tolerance [m],
-        line_search_steps and g (3) [m/s^2] in.  ``serial`` (compile-time) runs the strands one after the other:
+        an iteration): the HEADER (n, ns, max_iterations, tolerance [m], line_search_steps, g (3) [m/s^2]) in;
+        positions (3n) [m], edge tangents (3n), reference directors (3n) and twists (n) [rad] in and out (the
+        frames read and written with the twist only); per strand (5 ns) iterations, converged (0 / 1), last and
+        previous moves [m] and energy [J] out.  ``serial`` (compile-time) runs the strands one after the other:
         for a few strands the thread pool's start (~70 us) would cost more than the strands themselves."""
-        n = self.x.shape[0]
-        ns = self.strand_start.shape[0]
-        o = 10 * n
-        p0 = o + 5 * ns
-        max_iterations = ti.cast(io[p0], ti.i32)
-        tolerance = io[p0 + 1]
-        line_search_steps = ti.cast(io[p0 + 2], ti.i32)
-        g = vec3d(io[p0 + 3], io[p0 + 4], io[p0 + 5])
+        n = ti.cast(io[0], ti.i32)
+        ns = ti.cast(io[1], ti.i32)
+        max_iterations = ti.cast(io[2], ti.i32)
+        tolerance = io[3]
+        line_search_steps = ti.cast(io[4], ti.i32)
+        g = vec3d(io[5], io[6], io[7])
+        X0, T0, R0, TH0, O0 = HEADER, HEADER + 3 * n, HEADER + 6 * n, HEADER + 9 * n, HEADER + 10 * n
         if ti.static(serial):
             ti.loop_config(serialize=True)
         for s in range(ns):
             a, m = self.strand_start[s], self.strand_count[s]
             for k in range(m):
                 v = a + k
-                self.x[v] = vec3d(io[3 * v], io[3 * v + 1], io[3 * v + 2])
+                self.x[v] = vec3d(io[X0 + 3 * v], io[X0 + 3 * v + 1], io[X0 + 3 * v + 2])
                 if ti.static(self.twist):
-                    self.edge_t[v] = vec3d(io[3 * n + 3 * v], io[3 * n + 3 * v + 1], io[3 * n + 3 * v + 2])
-                    self.edge_ref[v] = vec3d(io[6 * n + 3 * v], io[6 * n + 3 * v + 1], io[6 * n + 3 * v + 2])
-                    self.theta[v] = io[9 * n + v]
+                    self.edge_t[v] = vec3d(io[T0 + 3 * v], io[T0 + 3 * v + 1], io[T0 + 3 * v + 2])
+                    self.edge_ref[v] = vec3d(io[R0 + 3 * v], io[R0 + 3 * v + 1], io[R0 + 3 * v + 2])
+                    self.theta[v] = io[TH0 + v]
             E = self._energy(a, m, self.x, self.theta, g)
             it, conv, move, previous = 0, 0, ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
             while it < max_iterations and conv == 0:
@@ -467,17 +488,17 @@ class SolverStaticNewton:
             for k in range(m):
                 v = a + k
                 for r in ti.static(range(3)):
-                    io[3 * v + r] = self.x[v][r]
+                    io[X0 + 3 * v + r] = self.x[v][r]
                 if ti.static(self.twist):
                     for r in ti.static(range(3)):
-                        io[3 * n + 3 * v + r] = self.edge_t[v][r]
-                        io[6 * n + 3 * v + r] = self.edge_ref[v][r]
-                    io[9 * n + v] = self.theta[v]
-            io[o + 5 * s] = it
-            io[o + 5 * s + 1] = conv
-            io[o + 5 * s + 2] = move
-            io[o + 5 * s + 3] = previous
-            io[o + 5 * s + 4] = E
+                        io[T0 + 3 * v + r] = self.edge_t[v][r]
+                        io[R0 + 3 * v + r] = self.edge_ref[v][r]
+                    io[TH0 + v] = self.theta[v]
+            io[O0 + 5 * s] = it
+            io[O0 + 5 * s + 1] = conv
+            io[O0 + 5 * s + 2] = move
+            io[O0 + 5 * s + 3] = previous
+            io[O0 + 5 * s + 4] = E
 
     # ------------------------------------------------------------------ public
     def solve(self, state, control) -> StaticNewtonResult:
@@ -517,15 +538,17 @@ class SolverStaticNewton:
         if not np.all(np.isfinite(x)):
             raise ValueError("SolverStaticNewton: the positions are not finite")
         t, ref, theta = self._rest_frames if frames is None else frames
-        io = np.empty(10 * n + 5 * ns + 6)
-        io[:3 * n] = x.reshape(-1)
-        io[3 * n:6 * n] = np.asarray(t, np.float64).reshape(-1)
-        io[6 * n:9 * n] = np.asarray(ref, np.float64).reshape(-1)
-        io[9 * n:10 * n] = np.asarray(theta, np.float64).reshape(-1)
-        io[10 * n + 5 * ns:] = (c.max_iterations, c.tolerance, c.line_search_steps, *[float(v) for v in gravity])
+        H = HEADER
+        io = np.empty(H + 10 * n + 5 * ns)
+        io[:H] = (n, ns, c.max_iterations, c.tolerance, c.line_search_steps, *[float(v) for v in gravity])
+        io[H:H + 3 * n] = x.reshape(-1)
+        io[H + 3 * n:H + 6 * n] = np.asarray(t, np.float64).reshape(-1)
+        io[H + 6 * n:H + 9 * n] = np.asarray(ref, np.float64).reshape(-1)
+        io[H + 9 * n:H + 10 * n] = np.asarray(theta, np.float64).reshape(-1)
         self._solve(ns <= self.SERIAL_STRANDS, io)
-        out = io[10 * n:10 * n + 5 * ns].reshape(ns, 5)
+        out = io[H + 10 * n:].reshape(ns, 5)
         result = StaticNewtonResult(out[:, 0].astype(np.int64), out[:, 1] > 0.5, out[:, 2].copy(), out[:, 3].copy(),
                                     out[:, 4].copy())
-        frames_out = (io[3 * n:6 * n].reshape(n, 3), io[6 * n:9 * n].reshape(n, 3), io[9 * n:10 * n].copy())
-        return io[:3 * n].reshape(n, 3).copy(), result, frames_out
+        frames_out = (io[H + 3 * n:H + 6 * n].reshape(n, 3), io[H + 6 * n:H + 9 * n].reshape(n, 3),
+                      io[H + 9 * n:H + 10 * n].copy())
+        return io[H:H + 3 * n].reshape(n, 3).copy(), result, frames_out

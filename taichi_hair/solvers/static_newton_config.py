@@ -92,3 +92,20 @@ def rest_strain(model, bend: np.ndarray) -> np.ndarray:
         safe = np.where(bend > 0.0, bend, 1.0)
         k = np.where(bend > 0.0, k - np.asarray(moment, np.float64) / safe, k)
     return np.where(np.asarray(h["pair_is_active"]).astype(bool)[:, None], k, 0.0)
+
+
+def static_newton_twist(model, solver_config=None) -> bool:
+    """Whether the static solve needs the twist angles as unknowns for ``model`` (curved, elliptic or sag-free
+    strands), or drops them exactly (:func:`taichi_hair.frames.twist_choice`)."""
+    from ..config import SolverADMMConfig
+    from ..frames import twist_choice
+
+    cfg = solver_config or SolverADMMConfig()
+    h = model.host
+    moment = h.get("pair_rest_moment")
+    if moment is not None and np.any(np.asarray(moment) != 0.0):
+        return True
+    active = np.asarray(h["pair_is_active"]).astype(bool)
+    vstar = model.pair_voronoi_length(cfg.voronoi_rescaling)
+    bend = np.where(active[:, None], np.asarray(h["pair_bending_modulus"], np.float64) / vstar[:, None], 0.0)
+    return not twist_choice(h, rest_strain(model, bend))[0]
