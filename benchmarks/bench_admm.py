@@ -14,7 +14,7 @@
    compilation is reported apart.
 
 Usage:
-    python benchmarks/bench_admm.py [--arch cpu|cuda] [--sizes 1000x32,10000x32,1000x128] [--rod-only] [--out FILE]
+    python benchmarks/bench_admm.py [--arch cpu|cuda] [--sizes 1000x32,10000x32,1000x128] [--rod-only | --no-rod] [--out FILE]
 
 Figures are printed and written as JSON (default benchmarks/results/admm_<arch>.json).
 """
@@ -172,6 +172,7 @@ def main(argv=None):
     p.add_argument("--anderson", default=None,
                    help="comma-separated Anderson windows to compare in one run (default: the solver's default)")
     p.add_argument("--rod-only", action="store_true", help="only the rod-to-rest comparison (no throughput runs)")
+    p.add_argument("--no-rod", action="store_true", help="only the throughput runs (no rod-to-rest comparison)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     bench = Bench("admm", argv)
@@ -194,31 +195,32 @@ def main(argv=None):
             print(f"{size:>16} {r['anderson_window']:8d} {r['ms_per_iteration']:9.3f} {r['mvertex_iterations_per_s']:11.2f} "
                   f"{r['compile_and_first_step_s']:10.2f}  {stages}", flush=True)
     out["rod_to_rest_by_window"] = []
-    for w in windows:
+    for w in ([] if args.no_rod else windows):
         rest = rod_to_rest(th, ti, schedule=args.schedule, anderson=w)
         out["rod_to_rest_by_window"].append(rest)
         print(f"10 cm rod, 40 edges, to rest within 0.1% (quasistatic ADMM, w0={rest['w0']}, Anderson window "
               f"{rest['anderson_window']}): {rest['iterations']} iterations, {1e3 * rest['wall_s']:.2f} ms wall "
               f"(compile {rest['compile_s']:.2f} s), tip drop {1e3 * rest['final_tip_drop_m']:.3f} mm", flush=True)
-    out["rod_to_rest"] = rest
-    newton = rod_to_rest_newton(th, ti)
-    out["rod_to_rest_static_newton"] = newton
-    print(f"10 cm rod, static Newton solve (solvers/static_newton.py): {newton['iterations']} Gauss-Newton iterations "
-          f"to 0.1%, {1e3 * newton['wall_s']:.3f} ms wall (min {1e3 * newton['wall_s_min']:.3f}); to 1e-10 m "
-          f"{newton['iterations_to_tolerance']} iterations, {1e3 * newton['wall_s_to_tolerance']:.3f} ms "
-          f"(compile {newton['compile_s']:.2f} s), tip drop {1e3 * newton['final_tip_drop_m']:.3f} mm", flush=True)
-    if not args.no_mujoco:
-        try:
-            import mujoco_cable  # benchmarks/mujoco_cable.py (the script's folder is on sys.path)
+    if not args.no_rod:
+        out["rod_to_rest"] = rest
+        newton = rod_to_rest_newton(th, ti)
+        out["rod_to_rest_static_newton"] = newton
+        print(f"10 cm rod, static Newton solve (solvers/static_newton.py): {newton['iterations']} Gauss-Newton iterations "
+              f"to 0.1%, {1e3 * newton['wall_s']:.3f} ms wall (min {1e3 * newton['wall_s_min']:.3f}); to 1e-10 m "
+              f"{newton['iterations_to_tolerance']} iterations, {1e3 * newton['wall_s_to_tolerance']:.3f} ms "
+              f"(compile {newton['compile_s']:.2f} s), tip drop {1e3 * newton['final_tip_drop_m']:.3f} mm", flush=True)
+        if not args.no_mujoco:
+            try:
+                import mujoco_cable  # benchmarks/mujoco_cable.py (the script's folder is on sys.path)
 
-            mj = mujoco_cable.time_to_rest()
-            out["mujoco_rod_to_rest"] = mj
-            print(f"MuJoCo cable, same rod: {mj['steps']} steps, {1e3 * mj['wall_s']:.2f} ms wall "
-                  f"(compile {1e3 * mj['compile_s']:.1f} ms), tip drop {1e3 * mj['final_tip_drop_m']:.3f} mm; "
-                  f"ratio ADMM/MuJoCo wall time = {rest['wall_s'] / mj['wall_s']:.1f}, static Newton/MuJoCo "
-                  f"{newton['wall_s'] / mj['wall_s']:.3f} (to 1e-10 m: {newton['wall_s_to_tolerance'] / mj['wall_s']:.3f})")
-        except ImportError as exc:
-            print(f"MuJoCo comparison skipped: {exc}")
+                mj = mujoco_cable.time_to_rest()
+                out["mujoco_rod_to_rest"] = mj
+                print(f"MuJoCo cable, same rod: {mj['steps']} steps, {1e3 * mj['wall_s']:.2f} ms wall "
+                      f"(compile {1e3 * mj['compile_s']:.1f} ms), tip drop {1e3 * mj['final_tip_drop_m']:.3f} mm; "
+                      f"ratio ADMM/MuJoCo wall time = {rest['wall_s'] / mj['wall_s']:.1f}, static Newton/MuJoCo "
+                      f"{newton['wall_s'] / mj['wall_s']:.3f} (to 1e-10 m: {newton['wall_s_to_tolerance'] / mj['wall_s']:.3f})")
+            except ImportError as exc:
+                print(f"MuJoCo comparison skipped: {exc}")
     path = bench.write(args.out or results_path(f"admm_{arch}.json"), out)
     print(f"wrote {path}")
     return 0

@@ -43,6 +43,8 @@ def main(argv=None):
     p.add_argument("--contacts", choices=["on", "off"], default="on")
     p.add_argument("--frames", type=int, default=5, help="measured frames (after 2 warm-up frames)")
     p.add_argument("--size", type=int, nargs=2, default=(960, 720))
+    p.add_argument("--schedule", default="auto", choices=["auto", "stage", "strand"],
+                   help="the guides' ADMM launch schedule (GroomingConfig.schedule)")
     p.add_argument("--no-draw", action="store_true", help="skip the GGUI drawing (no Vulkan device)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
@@ -58,6 +60,7 @@ def main(argv=None):
 
     res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
+           "schedule": args.schedule,
            "image": list(args.size), "date": datetime.date.today().isoformat()}
 
     with stopwatch(ti.sync) as sw:
@@ -66,7 +69,7 @@ def main(argv=None):
                                                      vertices_per_strand=args.vertices, length=0.25, seed=0))
     res["generate_s"] = sw.seconds
     cfg = GroomingConfig(iterations=args.iterations, guide_ratio=args.guide_ratio,
-                         contacts=args.contacts == "on", autosave_every=0)
+                         contacts=args.contacts == "on", autosave_every=0, schedule=args.schedule)
     session = GroomingSession(groom, cfg)
     with stopwatch(ti.sync) as sw:
         session._ensure_built()

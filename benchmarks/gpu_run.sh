@@ -13,13 +13,21 @@
 #   4. bench_skinning.py: 86k render strands from 8,600 guides;
 #   5. bench_groom.py: grooming, 8,600 guides x 14 (120k vertices) with contacts, no drawing (aim 8 ms);
 #   6. the hairball at 16,000 strands (the paper's Table 1 row; aim 0.09 s per frame), 12 frames.
+# and, named in CASES only (CASES="admm_strand groom_strand hairball_profile"):
+#   admm_strand, groom_strand: cases 2 and 5 with the strand schedule (all iterations of a strand in one thread);
+#   hairball_profile: 3 frames of case 6 under Taichi's kernel profiler (benchmarks/probes/kernel_profile.py).
+# CASES (default "hang admm shape skinning groom hairball") picks the cases to run.
 # Everything goes to $OUT: gpu_log.txt (all output) and one JSON / CSV per benchmark (at most 8 files).
 # Where a folder .whl holds wheels (a bare machine: taichi, trimesh, ...), they are installed first into
-# /tmp/site; the kernel cache is shared by the cases through TI_OFFLINE_CACHE_FILE_PATH.
+# /tmp/site; the kernel cache is shared by the cases through TI_OFFLINE_CACHE_FILE_PATH.  The grooming cases
+# need the head's voxel SDF: without mesh2sdf (no wheel for Python 3.12) a folder .sdfcache holding it
+# (TAICHI_HAIR_CACHE_DIR=.sdfcache, filled on a machine with mesh2sdf) is used.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 ARCH=${ARCH:-cuda}
 SMALL=${SMALL:-0}
+CASES=" ${CASES:-hang admm shape skinning groom hairball} "
+want() { [[ "$CASES" == *" $1 "* ]]; }
 OUT=${OUT:-benchmarks/results/gpu}
 mkdir -p "$OUT"
 LOG="$OUT/gpu_log.txt"
@@ -33,6 +41,7 @@ fi
 export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}"
 export TI_OFFLINE_CACHE_FILE_PATH=${TI_OFFLINE_CACHE_FILE_PATH:-/tmp/taichi-hair-gpu-cache}
 export MPLBACKEND=Agg
+if [ -d .sdfcache ] && ! python3 -c "import mesh2sdf" 2>/dev/null; then export TAICHI_HAIR_CACHE_DIR=$PWD/.sdfcache; fi
 # Taichi's CUDA backend takes its fields from one pre-allocated pool (1 GB by default: too small for the
 # 16k hairball's contact buffers); ti.init reads TI_<option> from the environment.
 [ "$ARCH" = cuda ] && export TI_DEVICE_MEMORY_GB=${TI_DEVICE_MEMORY_GB:-24}
@@ -77,6 +86,7 @@ EOF
 case_run taichi_sanity 60 python3 /tmp/thg_sanity.py
 
 # 1. Same motion on the arch and on the CPU.
+if want hang; then
 case_run hang_$ARCH 90 python3 -m taichi_hair.cli simulate hang --strands $HANG --frames 12 --quiet --arch $ARCH --out /tmp/thg_hang_arch
 case_run hang_cpu 60 python3 -m taichi_hair.cli simulate hang --strands $HANG --frames 12 --quiet --arch cpu --out /tmp/thg_hang_cpu
 python3 - "$OUT/hang_compare.json" <<'EOF' >>"$LOG" 2>&1
@@ -97,17 +107,28 @@ except Exception as e:  # recorded, not hidden
 json.dump(out, open(sys.argv[1], "w"), indent=1)
 print("hang arch vs cpu:", {k: out.get(k) for k in ("max_m", "p99_m", "error")})
 EOF
+fi
 
 # 2-5. The benchmarks, each writing its JSON.
-case_run admm 120 python3 benchmarks/bench_admm.py --arch $ARCH --sizes $ADMM --no-mujoco --out "$OUT/admm_$ARCH.json"
-case_run shape 90 python3 benchmarks/bench_shape.py --arch $ARCH --sizes $SHAPE --out "$OUT/shape_$ARCH.json"
-case_run skinning 60 python3 benchmarks/bench_skinning.py --arch $ARCH --strands $SKIN --out "$OUT/skinning_$ARCH.json"
-case_run groom 120 python3 benchmarks/bench_groom.py --arch $ARCH --strands $GROOM --no-draw --out "$OUT/groom_$ARCH.json"
+want admm && case_run admm 120 python3 benchmarks/bench_admm.py --arch $ARCH --sizes $ADMM --no-mujoco --out "$OUT/admm_$ARCH.json"
+want shape && case_run shape 90 python3 benchmarks/bench_shape.py --arch $ARCH --sizes $SHAPE --out "$OUT/shape_$ARCH.json"
+want skinning && case_run skinning 60 python3 benchmarks/bench_skinning.py --arch $ARCH --strands $SKIN --out "$OUT/skinning_$ARCH.json"
+want groom && case_run groom 120 python3 benchmarks/bench_groom.py --arch $ARCH --strands $GROOM --no-draw --out "$OUT/groom_$ARCH.json"
 
 # 6. The hairball at the paper's 16k (proximity contacts, the paper's settings).
+if want hairball; then
 case_run hairball 200 python3 -m taichi_hair.cli simulate hairball --strands $BALL --frames $BALL_FRAMES --quiet --profile \
   --arch $ARCH --out /tmp/thg_hairball
 cp /tmp/thg_hairball/summary.json "$OUT/hairball_summary.json" 2>/dev/null
 cp /tmp/thg_hairball/stats.csv "$OUT/hairball_stats.csv" 2>/dev/null
+fi
+
+# The schedule comparison and the kernel profile (named in CASES only).
+want admm_strand && case_run admm_strand 90 python3 benchmarks/bench_admm.py --arch $ARCH --sizes $ADMM --schedule strand \
+  --no-rod --no-mujoco --out "$OUT/admm_strand_$ARCH.json"
+want groom_strand && case_run groom_strand 150 python3 benchmarks/bench_groom.py --arch $ARCH --strands $GROOM --no-draw \
+  --schedule strand --out "$OUT/groom_strand_$ARCH.json"
+want hairball_profile && case_run hairball_profile 150 python3 benchmarks/probes/kernel_profile.py --top 30 \
+  --json "$OUT/hairball_kernels_$ARCH.json" -- hairball --strands $BALL --frames 3 --quiet --arch $ARCH --out /tmp/thg_hb_prof
 echo "=== total wall $SECONDS s" >>"$LOG"
 grep "^===.*exit\|^=== total\|^hang arch" "$LOG"

@@ -62,6 +62,8 @@ class GroomingConfig:
         rest_pose: ``"authored"`` (the groom's rest shape is its rest state: it sags under gravity) or
             ``"sag-free"`` (rest strains solved so that the rest shape is an equilibrium under gravity,
             :mod:`taichi_hair.solvers.rest_pose`; re-solved after every edit of the rest shape).
+        schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (strand on CPU, stage on GPU),
+            ``"stage"`` or ``"strand"`` (SolverADMMConfig.schedule: same results, other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
         undo_limit: most undo snapshots kept [-].
     """
@@ -79,6 +81,7 @@ class GroomingConfig:
     contact_margin: float = 1.0e-4
     w0: float = 1.0
     rest_pose: str = "authored"
+    schedule: str = "auto"
     autosave_every: int = 1
     undo_limit: int = 100
 
@@ -112,6 +115,8 @@ class GroomingConfig:
         if not isinstance(self.contacts, (bool, np.bool_)):
             raise ValueError(f"GroomingConfig.contacts must be true or false, got {self.contacts!r}")
         self.contacts = bool(self.contacts)
+        if self.schedule not in ("auto", "stage", "strand"):
+            raise ValueError(f"GroomingConfig.schedule must be 'auto', 'stage' or 'strand', got {self.schedule!r}")
         if self.rest_pose not in ("authored", "sag-free"):
             raise ValueError(f"GroomingConfig.rest_pose must be 'authored' or 'sag-free', got {self.rest_pose!r}")
 

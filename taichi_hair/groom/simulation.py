@@ -124,7 +124,8 @@ class GuideSimulation:
         guide_rest, material = guide_setup(g, cfg, guides)
         model = guide_builder(guide_rest, material).finalize()
         self.model, self.guides = model, np.asarray(guides)
-        self.solver_config = SolverADMMConfig(iterations=cfg.iterations, mode="quasistatic", w0=cfg.w0)
+        self.solver_config = SolverADMMConfig(iterations=cfg.iterations, mode="quasistatic", w0=cfg.w0,
+                                              schedule=cfg.schedule)
         self._solve_rest_pose(cfg)
         # Proximity only (Sec. 5.3): no velocity-dependent margin growth.  The pipeline always exists:
         # it holds the comb, an idle collider on its own body until a stroke enables it.
