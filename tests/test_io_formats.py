@@ -353,6 +353,33 @@ def test_ply_hand_made_ascii_with_colours_and_edges(tmp_path):
         load_groom(p)
 
 
+@pytest.mark.parametrize("lengths", [(3, 3, 3, 3), (3, 4, 0, 3)], ids=["uniform", "mixed"])
+def test_binary_ply_list_records_read_the_same_whether_uniform_or_walked(tmp_path, lengths):
+    """An element with lists is read at once when every record's list has the first record's length
+    (``ply._uniform_records``) and walked record by record otherwise; a scalar after the list (here a per-face
+    "flags" int) and the strands that follow come out the same either way, and a record that breaks the
+    uniformity late (the last one) sends the read down the walk."""
+    pts = np.array([[0, 0, 0], [0, 1, 0], [0, 2, 0]], "<f4")
+    head = ("ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            f"property float z\nelement face {len(lengths)}\nproperty list uchar int vertex_indices\n"
+            "property int flags\nelement strand 1\nproperty int segments\nend_header\n").encode()
+    faces = b"".join(bytes([k]) + np.arange(k, dtype="<i4").tobytes() + np.array([7 + j], "<i4").tobytes()
+                     for j, k in enumerate(lengths))
+    p = tmp_path / "faces.ply"
+    p.write_bytes(head + pts.tobytes() + faces + np.array([2], "<i4").tobytes())
+    from taichi_hair.io import ply
+
+    fmt, elements, body = ply._parse_header(p.read_bytes(), p)
+    face = next(e for e in elements if e.name == "face")
+    fast = ply._uniform_records(p.read_bytes(), face, body + pts.nbytes, "<", len(p.read_bytes()))
+    assert (fast is not None) == (len(set(lengths)) == 1)
+    if fast is not None:
+        np.testing.assert_array_equal(fast[0]["flags"], [7, 8, 9, 10])
+    g = load_groom(p)
+    np.testing.assert_array_equal(g.points, pts)
+    np.testing.assert_array_equal(g.strand_offsets, [0, 3])
+
+
 def test_usc_skips_short_strands_with_a_warning(tmp_path):
     strands = [np.zeros((1, 3)), np.arange(6).reshape(2, 3), np.zeros((0, 3)), np.arange(9).reshape(3, 3) * 0.01]
     data = struct.pack("<i", len(strands)) + b"".join(

@@ -146,6 +146,11 @@ def _read_binary(data: bytes, path, elements, offset: int, order: str) -> dict:
         if el.count * minimum > r.size - offset:
             raise GroomFormatError(path, f"element {el.name!r} count {el.count} needs at least "
                                          f"{el.count * minimum} bytes but {r.size - offset} remain", offset=offset)
+        uniform = _uniform_records(r.data, el, offset, order, r.size)
+        if uniform is not None:
+            # Every record's lists as long as the first one's (triangles only, say): one structured view.
+            out[el.name], offset = uniform
+            continue
         # Scalars go into arrays of the element's count (bounded by the size check above); lists, which the
         # reader never uses (a used property must be a scalar), are walked over, not kept.
         cols = {n: np.empty(el.count, order + t) for n, t, c in el.props if c is None}
@@ -171,6 +176,42 @@ def _read_binary(data: bytes, path, elements, offset: int, order: str) -> dict:
         raise GroomFormatError(path, f"{r.size - offset} bytes follow the last element; expected the file to end",
                                offset=offset)
     return out
+
+
+def _uniform_records(data: bytes, el, offset: int, order: str, size: int):
+    """The element read at once when each of its lists has, in every record, the length it has in the first
+    (checked on every record); else None, and the caller walks the records one by one.
+
+    Returns ({scalar property: array}, offset after the element).  Measured (a 3 MB binary PLY of 3 M
+    records of an empty list, the fault-injection run's slow file): 3.6 s walked, milliseconds here."""
+    if el.count == 0:
+        return None
+    fields, pos = [], offset
+    for i, (n, t, c) in enumerate(el.props):
+        if c is None:
+            fields.append((f"p{i}", order + t))
+            pos += np.dtype(t).itemsize
+            continue
+        ct = np.dtype(order + c)
+        if pos + ct.itemsize > size:
+            return None
+        k = int(np.frombuffer(data, ct, 1, pos)[0])
+        if k < 0:
+            return None  # the walk reports it, naming the offset
+        fields.append((f"p{i}", ct))
+        if k > 0:
+            fields.append((f"p{i}_items", order + t, (k,)))
+        pos += ct.itemsize + k * np.dtype(t).itemsize
+    rec = np.dtype(fields)
+    if el.count * rec.itemsize > size - offset:
+        return None
+    arr = np.frombuffer(data, rec, el.count, offset)
+    for i, (n, t, c) in enumerate(el.props):
+        if c is not None and not np.all(arr[f"p{i}"] == arr[f"p{i}"][0]):
+            return None
+    cols = {n: arr[f"p{i}"].astype(arr[f"p{i}"].dtype.newbyteorder("=")) for i, (n, t, c) in enumerate(el.props)
+            if c is None}
+    return cols, offset + el.count * rec.itemsize
 
 
 def _read_ascii(data: bytes, path, elements, offset: int) -> dict:
