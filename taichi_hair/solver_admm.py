@@ -232,6 +232,14 @@ class SolverADMM(SolverBase):
             # local step's Hessian (Newton instead of Gauss-Newton) is the next thing to try, not a larger weight.
             rho = np.where(active, np.linalg.norm(mu[:, :2] / safe[:, :2], axis=1), 0.0)
             weight = np.maximum(weight, PRESTRESS_WEIGHT * rho * weight / cfg.w0)
+        # Weights past the solver's float type (an absurd w0, issue 17): one line naming the field, not numpy's
+        # "overflow encountered in cast" and a divergence at step 1.
+        top = float(np.finfo(f).max) / 1e6  # headroom: W_y is summed and multiplied in the global step
+        if np.any(weight > top):
+            k = int(np.argmax(weight))
+            raise ValueError(f"SolverADMMConfig.w0 = {cfg.w0:g} makes the elasticity weight W_y of pair {k} "
+                             f"{weight[k]:.3g}, beyond what {np.dtype(f).name} holds with headroom ({top:.3g}); "
+                             f"use w0 of order 1 (the default 1, the paper's 25)")
         self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
         self.buf.pair_admm_weight.from_numpy(weight.astype(f))
         self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))

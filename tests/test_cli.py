@@ -157,6 +157,25 @@ def test_scene_file_errors_are_one_line(tmp_path):
     assert proc.returncode == 2 and "read-only" in proc.stderr
     proc = run_cli("simulate", "hang", "--vertices-per-strand", "8", "--out", str(tmp_path / "o"))
     assert proc.returncode == 2 and "TOML scenes" in proc.stderr
+    # An absurd w0 overflows the float32 weights: one line naming the field, no frames written.
+    proc = run_cli("simulate", HAIRBALL_TOML, "--strands", "4", "--frames", "1", "--set", "solver.w0=1e300",
+                   "--out", str(tmp_path / "w0"))
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and "overflow" not in proc.stderr
+    assert proc.stderr.strip().splitlines()[-1].startswith("error: SolverADMMConfig.w0 = 1e+300 makes the elasticity")
+    assert not (tmp_path / "w0").exists()
+
+
+def test_file_outputs_with_the_same_stem_keep_their_own_sidecars(tmp_path):
+    """x.usda and x.thair.npz once shared x.summary.json / x.stats.csv / x.bodies.npz and overwrote each other's:
+    the sidecars are named after the whole file name."""
+    for out, strands in (("x.usda", "3"), ("x.thair.npz", "5")):
+        proc = run_cli("simulate", "hang", "--strands", strands, "--frames", "1", "--quiet", "--out", str(tmp_path / out))
+        assert proc.returncode == 0, proc.stderr
+    for out, strands in (("x.usda", 3), ("x.thair.npz", 5)):
+        summary = json.loads((tmp_path / f"{out}.summary.json").read_text())
+        assert summary["strands"] == strands and summary["output"].endswith(out)
+        assert (tmp_path / f"{out}.stats.csv").is_file() and (tmp_path / f"{out}.bodies.npz").is_file()
+    assert not (tmp_path / "x.summary.json").exists()
 
 
 SOFT_SCENE = """

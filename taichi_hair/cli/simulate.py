@@ -19,11 +19,11 @@ The output is chosen by the name given to ``--out``:
   (one groom file per frame, written as it completes; ``--frame-format``), ``stats.csv`` and
   ``summary.json``.
 
-For a file output the statistics, summary and checkpoint sit beside it: ``<name>.stats.csv``,
-``<name>.summary.json``, ``<name>.checkpoint.npz``.  Checkpoints (:mod:`taichi_hair.scene.checkpoint`, ADMM
-solver only) are written every ``--checkpoint-every`` frames and at the end; ``--resume`` continues from
-the last one and gives the same frames, bit for bit, as a run that never stopped (and refuses a
-checkpoint made for another scene or other settings).
+For a file output the statistics, summary and checkpoint sit beside it, named after its whole file name:
+``<file>.stats.csv``, ``<file>.summary.json``, ``<file>.checkpoint.npz`` (``x.usda`` -> ``x.usda.summary.json``).
+Checkpoints (:mod:`taichi_hair.scene.checkpoint`, ADMM solver only) are written every ``--checkpoint-every``
+frames and at the end; ``--resume`` continues from the last one and gives the same frames, bit for bit, as a
+run that never stopped (and refuses a checkpoint made for another scene or other settings).
 
 Model no more than the scene needs (README, "Model no more than a scene needs"): the run prints, and writes into the
 summary under ``model``, what the solver chose to model and to skip.  ``--equilibrium`` asks for the rest
@@ -152,10 +152,13 @@ def _load_scene(args):
 def _output_layout(out: str) -> dict:
     """Where each output goes, by the extension of ``out``."""
     low = out.lower()
+    # A file output's sidecars are named after its whole file name (``x.usda`` -> ``x.usda.summary.json``), so two
+    # outputs with the same stem (``x.usda``, ``x.thair.npz``) never share, and overwrite, each other's.
+    base = out
     if low.endswith(USD_EXTENSIONS):
-        kind, base = "usd", os.path.splitext(out)[0]
+        kind = "usd"
     elif low.endswith(".npz"):
-        kind, base = "native", out[: -len(".thair.npz")] if low.endswith(".thair.npz") else out[:-4]
+        kind = "native"
     else:
         kind = "folder"
     if kind == "folder":

@@ -7,7 +7,7 @@ the bodies posed at each frame.
     body = res.body_meshes(k)                  # [(vertices (V, 3) [m], triangles (T, 3))] posed at frame k
 
 Bodies come from ``frames.npz`` (``body_rotation``, ``body_translation``, ``collider_K_vertices`` /
-``_faces`` / ``_body``) or, for a file output, from the ``<name>.bodies.npz`` written beside it.
+``_faces`` / ``_body``) or, for a file output, from the ``<file>.bodies.npz`` written beside it.
 """
 
 from __future__ import annotations
@@ -118,7 +118,13 @@ def _frames_npz(path: str) -> SimulationResult:
 
 
 def sidecar_bodies_path(path: str) -> str:
-    """``<name>.bodies.npz`` beside a file output (``out.usd`` -> ``out.bodies.npz``)."""
+    """``<file>.bodies.npz`` beside a file output (``out.usd`` -> ``out.usd.bodies.npz``: the whole file name, so
+    outputs with the same stem keep their own)."""
+    return path + ".bodies.npz"
+
+
+def _legacy_sidecar_bodies_path(path: str) -> str:
+    """Where results written before the whole-name rule kept it (``out.usd`` -> ``out.bodies.npz``)."""
     low = path.lower()
     base = path[: -len(".thair.npz")] if low.endswith(".thair.npz") else os.path.splitext(path)[0]
     return base + ".bodies.npz"
@@ -148,6 +154,8 @@ def load_result(path) -> SimulationResult:
     frames = g.point_frames if g.point_frames is not None and len(g.point_frames) else g.points[None]
     extra = {}
     side = sidecar_bodies_path(path)
+    if not os.path.isfile(side):
+        side = _legacy_sidecar_bodies_path(path)
     if os.path.isfile(side):
         with np.load(side) as data:
             extra = _bodies_from(data)
