@@ -9,8 +9,10 @@ load of a shared machine affects them alike; the kernel cache is warmed by one r
 
 - ``sequential_s``: each run as its own ``taichi-hair simulate`` process, one after the other (what a batch
   replaces: a process start, imports and ``ti.init`` per run);
-- ``batch_1_s`` / ``batch_2_s``: ``taichi-hair batch`` with ``--workers 1`` / ``2`` (a LocalCluster's start,
-  then one task per run in long-lived worker processes);
+- ``batch_1_s`` / ``batch_2_s``: ``taichi-hair batch`` with ``--workers 1`` / ``2`` at its default
+  ``--pack 0``: runs that differ only in their grooms share a task and one Model (cli/simulate_pack.py);
+- ``unpacked_1_s`` / ``unpacked_2_s``: the same with ``--pack 1`` (a LocalCluster's start, then one task per
+  run in long-lived worker processes); ``pack_saving_1`` / ``pack_saving_2`` = unpacked / packed;
 - ``speedup_2_over_1`` = batch_1_s / batch_2_s; ``speedup_2_over_sequential`` = sequential_s / batch_2_s;
 - ``overhead_per_task_s`` = (batch_1_s - sequential_s) / runs: what one worker costs per run over running
   the same runs one ``simulate`` at a time (negative: the batch is cheaper per run);
@@ -67,9 +69,11 @@ def main(argv=None) -> int:
         for c in commands:
             _cli(*c)
         sequential = time.perf_counter() - t
-        batch = {}
+        batch, unpacked = {}, {}
         for w in (1, 2):
             batch[w] = _cli("batch", args.spec, "--out", os.path.join(tmp, f"b{w}"), "--workers", w, "--quiet")
+            unpacked[w] = _cli("batch", args.spec, "--out", os.path.join(tmp, f"u{w}"), "--workers", w, "--pack", 1,
+                               "--quiet")
         rerun = _cli("batch", args.spec, "--out", os.path.join(tmp, "b1"), "--workers", 1, "--quiet")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -77,6 +81,8 @@ def main(argv=None) -> int:
     figures = {
         "spec": os.path.relpath(args.spec, ROOT), "runs": n,
         "sequential_s": round(sequential, 2), "batch_1_s": round(batch[1], 2), "batch_2_s": round(batch[2], 2),
+        "unpacked_1_s": round(unpacked[1], 2), "unpacked_2_s": round(unpacked[2], 2),
+        "pack_saving_1": round(unpacked[1] / batch[1], 3), "pack_saving_2": round(unpacked[2] / batch[2], 3),
         "speedup_2_over_1": round(batch[1] / batch[2], 3),
         "speedup_2_over_sequential": round(sequential / batch[2], 3),
         "overhead_per_task_s": round((batch[1] - sequential) / n, 3),

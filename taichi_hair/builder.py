@@ -260,9 +260,31 @@ class GroomBuilder:
         self._strand_count += ns
         return np.arange(first, first + ns)
 
+    @classmethod
+    def merged(cls, builders: list) -> "GroomBuilder":
+        """One builder holding the strands of ``builders`` one after the other (their body counts equal):
+        its Model's host arrays are theirs concatenated, strand for strand (``host_arrays`` is per strand
+        and per vertex), which is what packing several runs into one Model relies on (cli/simulate_pack.py)."""
+        if not builders:
+            raise ValueError("GroomBuilder.merged: no builders")
+        body_counts = {b.body_count for b in builders}
+        if len(body_counts) != 1:
+            raise ValueError(f"GroomBuilder.merged: the builders have different body counts {sorted(body_counts)}")
+        out = cls(body_count=builders[0].body_count)
+        for b in builders:
+            for name in ("_points", "_counts", "_materials", "_bodies", "_twists", "_directors"):
+                getattr(out, name).extend(getattr(b, name))
+            out._strand_count += b._strand_count
+        return out
+
     # ------------------------------------------------------------------ finalize
     def finalize(self) -> Model:
         """Compute the rest state in float64 (vectorised over strands) and allocate every field once."""
+        return Model(*self.host_arrays())
+
+    def host_arrays(self) -> tuple:
+        """(host, materials, body_count) of the Model ``finalize`` makes, computed in float64 (vectorised over
+        strands) without allocating any field."""
         if not self._points:
             raise ValueError("GroomBuilder.finalize: no strands were added")
         counts = np.concatenate(self._counts)
@@ -347,4 +369,4 @@ class GroomBuilder:
             "strand_radius": radius, "strand_density": density, "strand_area": area,
             "strand_youngs_modulus_bend": e_bend,
         }
-        return Model(h, list(mats), self.body_count)
+        return h, list(mats), self.body_count

@@ -146,6 +146,66 @@ seed = 2
     assert proc.returncode == 1 and "3 runs, 2 finished earlier, 1 to run" in proc.stdout, proc.stdout
 
 
+def test_a_pack_steps_its_runs_as_one_model_with_each_runs_own_frames_bit_for_bit(tmp_path):
+    """Three hang runs with other seeds, strand counts and lengths in one task (cli/simulate_pack.py): one
+    Model, one solver, one compilation; each run's frames, per-frame quality columns, summary quality and
+    model choice are those of the same simulate run alone (bit for bit: nothing couples strands without
+    contacts).  Runs with other solver settings are not packed: each runs alone, still right."""
+    from taichi_hair.cli.batch import run_argv, run_pack_task, simulate_actions
+    from taichi_hair.cli.main import main
+    from taichi_hair.scene.batch import BatchRun
+
+    acts = simulate_actions()
+    out = str(tmp_path / "out")
+    runs = [BatchRun("a", "hang", dict(strands=3, frames=3, seed=0)),
+            BatchRun("b", "hang", dict(strands=4, frames=3, seed=1)),
+            BatchRun("c", "hang", dict(strands=2, frames=3, seed=2, length=0.15))]
+    argvs = [run_argv(r, out, acts) for r in runs]
+    res = run_pack_task([r.name for r in runs], argvs)
+    assert [r["exit_code"] for r in res] == [0, 0, 0] and all(r["packed_with"] == ["a", "b", "c"] for r in res), res
+    for r, argv in zip(runs, argvs):
+        solo = str(tmp_path / f"solo_{r.name}")
+        assert main([solo if a == os.path.join(out, r.name) else a for a in argv]) == 0
+        a, b = np.load(os.path.join(solo, "frames.npz")), np.load(os.path.join(out, r.name, "frames.npz"))
+        assert sorted(a.files) == sorted(b.files)
+        for k in a.files:
+            assert np.array_equal(a[k], b[k]), (r.name, k)
+        with open(os.path.join(solo, "stats.csv")) as fa, open(os.path.join(out, r.name, "stats.csv")) as fb:
+            ra, rb = list(csv.DictReader(fa)), list(csv.DictReader(fb))
+        assert [{k: v for k, v in x.items() if k != "ms"} for x in ra] == [{k: v for k, v in x.items() if k != "ms"}
+                                                                          for x in rb]
+        sa = json.loads(open(os.path.join(solo, "summary.json")).read())
+        sb = json.loads(open(os.path.join(out, r.name, "summary.json")).read())
+        assert sa["quality"] == sb["quality"] and sa["model"] == sb["model"]
+        assert sb["pack"]["runs"] == ["a", "b", "c"] and sb["strands"] == r.options["strands"]
+        assert os.path.isfile(os.path.join(out, r.name, "batch_done.json"))
+    # Other iteration counts: other solver settings, so no pack; each run alone (its own frames still right).
+    other = [BatchRun("d", "hang", dict(strands=2, frames=2, seed=0, iterations=5)),
+             BatchRun("e", "hang", dict(strands=2, frames=2, seed=0, iterations=10))]
+    res = run_pack_task(["d", "e"], [run_argv(r, out, acts) for r in other])
+    assert [r["exit_code"] for r in res] == [0, 0] and not any(r.get("packed_with") for r in res), res
+    log = open(os.path.join(out, "d", "batch.log")).read()
+    assert "note: not packed (PackRefused: " in log and "other solver settings" in log, log
+
+
+def test_runs_that_differ_only_in_their_grooms_share_a_pack():
+    """pack_groups: seed / strands / length / groom.* / material.* keys leave runs in one group; any other
+    option or key makes another; a group is cut into packs that spread the runs over the workers."""
+    from taichi_hair.cli.batch import pack_groups
+    from taichi_hair.scene.batch import BatchRun
+
+    runs = [BatchRun(f"s{k}", "hang", dict(frames=4, seed=k, strands=3 + k)) for k in range(4)]
+    runs += [BatchRun("i5", "hang", dict(frames=4, seed=0, iterations=5)),
+             BatchRun("m1", "x.toml", {}, {"material.youngs_modulus": 1e9}),
+             BatchRun("m2", "x.toml", {}, {"material.youngs_modulus": 2e9, "groom.seed": 3}),
+             BatchRun("f1", "x.toml", {}, {"solver.contacts.friction": 0.1})]
+    names = [r.name for r in runs]
+    tasks = pack_groups(runs, {}, names, workers=1, pack=0)
+    assert tasks == [["s0", "s1", "s2", "s3"], ["i5"], ["m1", "m2"], ["f1"]]
+    assert pack_groups(runs, {}, names, workers=4, pack=0)[:2] == [["s0", "s1"], ["s2", "s3"]]  # 8 runs / 4
+    assert all(len(t) == 1 for t in pack_groups(runs, {}, names, workers=1, pack=1))
+
+
 def _descendants(pid):
     import psutil
 

@@ -11,6 +11,12 @@ thread each runs them; each run initialises Taichi in its worker process (``ti.i
 a run starts clean and the previous run's fields are freed) and its kernels come from Taichi's offline cache,
 which the workers of one machine share (``TI_OFFLINE_CACHE_FILE_PATH``, default ``~/.cache/taichi``).
 
+Small runs are packed (``--pack``, default auto): runs of the same scene that differ only in their grooms
+(``seed``, ``strands``, ``length``, ``vertices_per_strand``, ``groom.*`` and ``material.*`` keys) go into one
+task that steps them as one Model (:mod:`taichi_hair.cli.simulate_pack`: same frames, bit for bit, when the
+scene has no contacts; otherwise the task runs them one by one), so set-up and kernel loading are paid once
+per task, not per run.  ``--pack 1`` runs every run on its own.
+
 A failed run (a bad parameter, a divergence, a worker killed) is recorded by name with its one-line error and
 the others go on; the command then exits 1 and names the failed runs.  ``DIR/batch.csv`` and
 ``DIR/batch.json`` gather every run's status, wall time, ms per frame and quality figures.  Running the same
@@ -39,7 +45,12 @@ from .common import CLIError
 #: Columns of batch.csv (and keys of each run in batch.json).
 COLUMNS = ("name", "status", "exit_code", "resumed_from_frame", "task_seconds", "wall_seconds", "ms_per_frame",
            "frames", "strands", "vertices", "strain_p50_max", "strain_p99_max", "strain_max", "body_penetration_max_m",
-           "vertices_inside_max", "hair_penetration_max_m", "came_to_rest", "diverged", "error", "command")
+           "vertices_inside_max", "hair_penetration_max_m", "came_to_rest", "diverged", "error", "packed_with",
+           "command")
+#: simulate options that change only a run's groom: runs differing in these (and in groom.* / material.* keys)
+#: may share a pack (cli/simulate_pack.py decides whether they really can).
+PACK_NEUTRAL_OPTIONS = ("seed", "strands", "length", "vertices_per_strand")
+PACK_NEUTRAL_SETS = ("groom.", "material.")
 DONE_FILE = "batch_done.json"
 LOG_FILE = "batch.log"
 
@@ -131,6 +142,95 @@ def run_task(name: str, argv: list) -> dict:
     return {"name": name, "exit_code": int(rc), "task_wall_seconds": wall, "error": error, "resumed": resumable}
 
 
+def run_pack_task(names: list, argvs: list) -> list:
+    """Several runs in one worker process, stepped as one Model when they can be (cli/simulate_pack.py), else
+    one by one (:func:`run_task`); returns :func:`run_task`'s record per run, ``packed_with`` naming the
+    pack's runs.  A run with a checkpoint (a rerun after a kill) resumes on its own."""
+    import contextlib
+    import io
+
+    if len(names) == 1:
+        return [run_task(names[0], argvs[0])]
+    alone = [i for i, a in enumerate(argvs) if os.path.exists(os.path.join(a[a.index("--out") + 1], "checkpoint.npz"))]
+    packed = [i for i in range(len(names)) if i not in alone]
+    results = {}
+    if len(packed) > 1:
+        buf = io.StringIO()
+        t0 = time.perf_counter()
+        codes = None
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+            try:
+                codes = _run_pack([argvs[i] for i in packed])
+            except Exception as exc:  # noqa: BLE001 - PackRefused, or anything: the runs then go one by one
+                print(f"note: not packed ({type(exc).__name__}: {exc}); running each run alone")
+        wall = time.perf_counter() - t0
+        log = buf.getvalue()
+        if codes is not None:
+            together = [names[i] for i in packed]
+            for i, rc in zip(packed, codes):
+                out = argvs[i][argvs[i].index("--out") + 1]
+                os.makedirs(out, exist_ok=True)
+                with open(os.path.join(out, LOG_FILE), "a") as fh:
+                    fh.write(f"$ taichi-hair {' '.join(argvs[i])}  # packed with {', '.join(together)}\n{log}\n")
+                if rc == 0:
+                    with open(os.path.join(out, DONE_FILE), "w") as fh:
+                        json.dump({"argv": argvs[i]}, fh)
+                results[i] = {"name": names[i], "exit_code": int(rc), "task_wall_seconds": wall, "resumed": False,
+                              "error": "" if rc == 0 else f"exit {rc} (see {LOG_FILE})", "packed_with": together}
+        else:
+            alone = sorted(alone + packed)
+            for i in packed:  # why they run alone, at the head of each run's log
+                out = argvs[i][argvs[i].index("--out") + 1]
+                os.makedirs(out, exist_ok=True)
+                with open(os.path.join(out, LOG_FILE), "a") as fh:
+                    fh.write(log)
+    for i in alone:
+        if i not in results:
+            results[i] = run_task(names[i], argvs[i])
+    return [results[i] for i in range(len(names))]
+
+
+def _run_pack(argvs: list) -> list:
+    """Prepare every run as simulate would, initialise Taichi once, and step them as one Model."""
+    from .common import _init_taichi
+    from .simulate import prepare_simulate
+    from .simulate_pack import PackedSimulate
+    from .simulate_run import SimulateRun
+
+    parser = simulate_parser()
+    prepared = []
+    for argv in argvs:
+        args = parser.parse_args(argv)
+        prepared.append((args, *prepare_simulate(args)))
+    args0 = prepared[0][0]
+    _, arch = _init_taichi(args0.arch, args0.precision)
+    runs = [SimulateRun(args, scene, warnings, layout, arch) for args, scene, warnings, layout in prepared]
+    return PackedSimulate(runs).run()
+
+
+def pack_groups(runs: list, argvs: dict, todo: list, workers: int, pack: int) -> list:
+    """The tasks of a batch: lists of run names.  Runs whose simulate arguments differ only in
+    ``PACK_NEUTRAL_OPTIONS`` and ``PACK_NEUTRAL_SETS`` keys share a group; a group is cut into packs of at most
+    ``pack`` runs (0: auto, the runs to do spread evenly over the workers; 1: no packing)."""
+    import math
+
+    from .simulate_pack import MAX_PACK
+
+    by_name = {r.name: r for r in runs}
+    size = pack if pack > 0 else max(1, math.ceil(len(todo) / max(workers, 1)))
+    size = min(size, MAX_PACK)
+    groups: dict = {}
+    for name in todo:
+        r = by_name[name]
+        opts = tuple(sorted((k, str(v)) for k, v in r.options.items() if k not in PACK_NEUTRAL_OPTIONS))
+        sets = tuple(sorted((k, str(v)) for k, v in r.sets.items() if not k.startswith(PACK_NEUTRAL_SETS)))
+        groups.setdefault((r.scene, opts, sets), []).append(name)
+    tasks = []
+    for members in groups.values():
+        tasks += [members[i:i + size] for i in range(0, len(members), size)]
+    return tasks
+
+
 # --------------------------------------------------------------------------- the driver
 def _finished(out: str, argv: list) -> bool:
     try:
@@ -159,7 +259,8 @@ def _row(name: str, out: str, argv: list, status: str, result: dict | None) -> d
         row["hair_penetration_max_m"] = q.get("hair_penetration_max_m_max")
     if result is not None:
         row.update(exit_code=result.get("exit_code"), error=result.get("error", ""),
-                   task_seconds=result.get("task_wall_seconds", ""))
+                   task_seconds=result.get("task_wall_seconds", ""),
+                   packed_with=" ".join(result.get("packed_with", [])))
     elif status == "done":
         row["exit_code"] = 0
     return row
@@ -206,6 +307,8 @@ def cmd_batch(args) -> int:
         raise CLIError(f"{args.spec}: no such batch file")
     if args.workers < 1 or args.workers > 256:
         raise CLIError(f"--workers must be in [1, 256], got {args.workers}")
+    if args.pack < 0:
+        raise CLIError(f"--pack must be >= 0 (0: auto, 1: no packing), got {args.pack}")
     actions = simulate_actions()
     try:
         runs = read_batch(args.spec, actions)
@@ -226,19 +329,25 @@ def cmd_batch(args) -> int:
         try:
             if client.has_dashboard and client.dashboard_link and not args.quiet:
                 print(f"Dask dashboard: {client.dashboard_link}", flush=True)
-            futures = {client.submit(run_task, name, argvs[name], key=f"run-{name}-{time.time_ns()}", pure=False):
-                       name for name in todo}
+            tasks = pack_groups(runs, argvs, todo, args.workers, args.pack)
+            futures = {client.submit(run_pack_task, names, [argvs[n] for n in names],
+                                     key=f"runs-{names[0]}-{len(names)}-{time.time_ns()}", pure=False): names
+                       for names in tasks}
             bar = Progress(len(todo), label="runs", enabled=not args.quiet)
-            failed = 0
-            for k, fut in enumerate(as_completed(futures), 1):
-                name = futures[fut]
+            failed = done = 0
+            for fut in as_completed(futures):
+                names = futures[fut]
                 try:
-                    results[name] = fut.result()
+                    for res in fut.result():
+                        results[res["name"]] = res
                 except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: recorded by name
                     msg = " ".join(str(exc).split()) or type(exc).__name__
-                    results[name] = {"name": name, "exit_code": -1, "error": f"{type(exc).__name__}: {msg}"[:300]}
-                failed += results[name]["exit_code"] != 0
-                bar.update(k, failed=failed)
+                    for name in names:
+                        results[name] = {"name": name, "exit_code": -1,
+                                         "error": f"{type(exc).__name__}: {msg}"[:300]}
+                failed += sum(results[n]["exit_code"] != 0 for n in names)
+                done += len(names)
+                bar.update(done, failed=failed)
             bar.close()
         finally:
             client.close()
@@ -293,5 +402,9 @@ def register(sub) -> None:
                    help="LocalCluster worker processes, one thread each (default: half the CPUs)")
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask cluster (tcp://host:8786) instead of a LocalCluster")
+    b.add_argument("--pack", type=int, default=0, metavar="N",
+                   help="most runs per task: runs that differ only in their grooms share a task and, when nothing "
+                        "couples their strands, one Model (0, default: spread the runs evenly over the workers; "
+                        "1: every run on its own)")
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     b.set_defaults(func=cmd_batch)

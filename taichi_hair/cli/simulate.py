@@ -74,7 +74,7 @@ def _named_scene(args):
         cfg = SolverADMMConfig(iterations=iterations, mode="dynamic", **integ)
         colliders = []
         body = BodyAnimation(function=lambda t: nod_rotation(hs, t), description={"preset": "hang-nod"})
-        builder = (lambda: build_hang(hs))
+        builder = (lambda: build_hang(hs, finalize=False))
         scene_desc = dict(vars(hs))
     else:
         hs = HairballScene(strands=d["strands"], length=args.length if args.length else 0.30, seed=d["seed"])
@@ -85,7 +85,7 @@ def _named_scene(args):
 
         colliders = [SphereCollider(radius=hs.ball_radius, friction=hs.friction, body=0)]
         body = BodyAnimation(function=hairball_rotation, description={"preset": "hairball"})
-        builder = (lambda: build_hairball(hs))
+        builder = (lambda: build_hairball(hs, finalize=False))
         scene_desc = dict(vars(hs), continuous=args.continuous or 0)
     desc = {"name": args.scene, "params": scene_desc, "iterations": iterations, "fps": d["fps"],
             "substeps": d["substeps"], **integ}
@@ -100,7 +100,7 @@ def _named_scene(args):
                      f"{hs.strands:,} strands", "use fewer --strands or --frames")
     return Scene(name=args.scene, path="", frames=d["frames"], fps=d["fps"], substeps=d["substeps"],
                  gravity=(0.0, -9.81, 0.0), groom=None, solver="admm", solver_config=cfg, colliders=colliders,
-                 bodies=[body], description=desc, model_builder=builder, rest_pose=rest_pose,
+                 bodies=[body], description=desc, groom_builder=builder, rest_pose=rest_pose,
                  vertex_count_hint=hs.vertex_count)
 
 
@@ -188,7 +188,18 @@ def _load_scene_reporting(args):
 
 
 def cmd_simulate(args) -> int:
-    scene, load_warnings = _load_scene_reporting(args)  # before ti.init: scene errors cost no start-up
+    scene, load_warnings, layout = prepare_simulate(args)
+    ti, arch = _init_taichi(args.arch, args.precision)
+    from .simulate_run import SimulateRun
+
+    return SimulateRun(args, scene, load_warnings, layout, arch).run()
+
+
+def prepare_simulate(args) -> tuple:
+    """Everything ``simulate`` checks before ``ti.init`` (scene errors cost no start-up): the scene, the
+    warnings raised while reading it, and the output layout.  A batch pack (cli/simulate_pack.py) prepares
+    each of its runs with it and initialises Taichi once."""
+    scene, load_warnings = _load_scene_reporting(args)
     if scene.groom is not None:
         from ..io.sizing import check_simulation
 
@@ -225,10 +236,7 @@ def cmd_simulate(args) -> int:
             _pxr()
         except Exception as exc:  # noqa: BLE001 - an ImportError with install advice
             raise CLIError(f"{out}: USD output needs usd-core ({exc})") from None
-    ti, arch = _init_taichi(args.arch, args.precision)
-    from .simulate_run import SimulateRun
-
-    return SimulateRun(args, scene, load_warnings, layout, arch).run()
+    return scene, load_warnings, layout
 
 
 # --------------------------------------------------------------------------- model choices

@@ -86,8 +86,8 @@ def strand_along(normal: np.ndarray, length: float, n: int, curl_radius: float, 
     return s[:, None] * t + offset
 
 
-def build_hang(scene: HangScene, material: RodMaterial | None = None):
-    """Builder-made Model for the scene; returns (model, root positions)."""
+def build_hang(scene: HangScene, material: RodMaterial | None = None, finalize: bool = True):
+    """The scene's Model (its GroomBuilder, not finalized, with ``finalize=False``)."""
     rng = np.random.default_rng(scene.seed)
     material = material or RodMaterial()
     # Roots below 0.6 R under the centre: strands hanging from there clear the sphere.
@@ -99,7 +99,7 @@ def build_hang(scene: HangScene, material: RodMaterial | None = None):
         pts = root + strand_along(nrm, scene.length * rng.uniform(0.85, 1.0), n, scene.curl_radius,
                                   scene.curl_pitch, rng.uniform(0, 2 * np.pi))
         b.add_strand(pts, material)
-    return b.finalize()
+    return b.finalize() if finalize else b
 
 
 def nod_rotation(scene: HangScene, time: float) -> np.ndarray:
@@ -151,8 +151,9 @@ class HairballScene:
         return self.strands * max(3, int(round(self.length / self.edge_length)) + 1)
 
 
-def build_hairball(scene: HairballScene):
-    """Model of the hairball: strands along the normals of the upper hemisphere, clamped to body 0."""
+def build_hairball(scene: HairballScene, finalize: bool = True):
+    """Model of the hairball: strands along the normals of the upper hemisphere, clamped to body 0 (its
+    GroomBuilder, not finalized, with ``finalize=False``)."""
     rng = np.random.default_rng(scene.seed)
     material = RodMaterial(radius=scene.radius)
     normals = -_fibonacci_lower_cap(scene.strands, 0.0)  # the lower cap y <= 0, mirrored to the top half
@@ -163,7 +164,7 @@ def build_hairball(scene: HairballScene):
         pts = root + strand_along(nrm, scene.length, n, scene.helix_radius, scene.helix_pitch,
                                   rng.uniform(0, 2 * np.pi))
         b.add_strand(pts, material)
-    return b.finalize()
+    return b.finalize() if finalize else b
 
 
 def _axis_rotation(axis, angle: float) -> np.ndarray:

@@ -116,7 +116,8 @@ class Scene:
         output: default output path ("" when none), resolved against the current directory.
         description: JSON-able description of everything that determines the result
             (checkpoints compare it before resuming).
-        model_builder: optional callable returning the Model (the built-in scenes use their own builders).
+        groom_builder: optional callable returning the groom's
+            :class:`~taichi_hair.builder.GroomBuilder`, not finalized (the built-in scenes use their own).
         rest_pose: "authored", "sag-free" or "file" ([groom] rest_pose; :mod:`taichi_hair.solvers.rest_pose`).
         rest_pose_check: also run ``check_stability`` after a sag-free solve ([groom] rest_pose_check).
         rest_pose_support: ``"none"``, ``"unheld"`` or ``"all"``: which strands the colliders may carry in the
@@ -141,12 +142,12 @@ class Scene:
     bodies: list = field(default_factory=list)
     output: str = ""
     description: dict = field(default_factory=dict)
-    model_builder: object = None
+    groom_builder: object = None
     rest_pose: str = "authored"
     rest_pose_check: bool = False
     rest_pose_support: str = "none"
     rest_pose_result: object = None
-    #: Vertices a ``model_builder`` will make (built-in scenes; 0 when unknown), for the size checks.
+    #: Vertices a ``groom_builder`` will make (built-in scenes; 0 when unknown), for the size checks.
     vertex_count_hint: int = 0
 
     @property
@@ -164,7 +165,7 @@ class Scene:
     def build_model(self):
         """The Model (allocates Taichi fields: call after ``ti.init``), with its sag-free rest pose solved
         when ``rest_pose = "sag-free"`` (the result in :attr:`rest_pose_result`)."""
-        model = self.model_builder() if self.model_builder is not None else self._build_groom_model()
+        model = self.builder().finalize()
         if self.rest_pose == "sag-free":
             self.rest_pose_result = self.solve_rest_pose(model)
         elif self.rest_pose == "file":
@@ -226,7 +227,12 @@ class Scene:
             check_stability(model, result, self.solver_config, gravity=self._gravity_in_body())
         return result
 
-    def _build_groom_model(self):
+    def builder(self):
+        """The groom's :class:`~taichi_hair.builder.GroomBuilder` with every strand added, not finalized (no
+        field allocated): ``build_model`` finalizes it; a batch pack merges several (cli/simulate_pack.py)."""
+        return self.groom_builder() if self.groom_builder is not None else self._groom_builder()
+
+    def _groom_builder(self):
         from ..builder import GroomBuilder
         from ..config import RodMaterial
 
@@ -242,7 +248,7 @@ class Scene:
                 b.add_strand(g.strand(s).astype(np.float64), mat, root=self.root, body=self.root_body)
         except ValueError as exc:
             raise SceneError(f"{self.path or self.name}: [groom] {exc}") from None
-        return b.finalize()
+        return b
 
     def make_solver(self, model, profile: bool = False):
         """The solver of the scene, with its colliders."""
