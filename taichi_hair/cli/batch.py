@@ -3,12 +3,12 @@
     taichi-hair batch assets/batches/hang_variants.toml --out out/batch --workers 2
     taichi-hair batch spec.toml --out /shared/out --scheduler tcp://10.0.0.5:8786   # an existing cluster
 
-The spec (:mod:`taichi_hair.scene.batch`) names a base scene and runs.  Each run is one Dask task that runs
-``simulate`` in a worker process exactly as ``taichi-hair simulate SCENE ... --out DIR/<name>`` would (the
-same arguments, so the same frames, bit for bit: tested), with stdout and stderr kept in
-``DIR/<name>/batch.log``.  Without ``--scheduler`` a ``LocalCluster`` of ``--workers`` processes with one
-thread each runs them; each run initialises Taichi in its worker process (``ti.init`` resets the runtime, so
-a run starts clean and the previous run's fields are freed) and its kernels come from Taichi's offline cache,
+The spec (:mod:`taichi_hair.scene.batch`) names a base scene and runs.  Each Dask task runs one run, or a
+pack of small runs (below), in a worker process exactly as ``taichi-hair simulate SCENE ... --out
+DIR/<name>`` would (the same arguments, so the same frames, bit for bit: tested), with stdout and stderr kept
+in ``DIR/<name>/batch.log``.  Without ``--scheduler`` a ``LocalCluster`` of ``--workers`` processes with one
+thread each runs them; each task initialises Taichi in its worker process (``ti.init`` resets the runtime, so
+a task starts clean and the previous task's fields are freed) and its kernels come from Taichi's offline cache,
 which the workers of one machine share (``TI_OFFLINE_CACHE_FILE_PATH``, default ``~/.cache/taichi``).
 
 Small runs are packed (``--pack``, default auto): runs of the same scene that differ only in their grooms
