@@ -30,7 +30,6 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     a = ap.parse_args(own)
     os.environ["TI_KERNEL_PROFILER"] = "1"
-    sys.path.insert(0, os.getcwd())
     import taichi as ti
 
     from taichi_hair.cli.main import main as cli_main
