@@ -165,6 +165,31 @@ def test_scene_file_errors_are_one_line(tmp_path):
     assert not (tmp_path / "w0").exists()
 
 
+def test_lighter_kernel_positions_change_no_bit_and_keep_file_and_line_in_compile_errors(tmp_path):
+    """cli.common.lighter_kernel_positions (a cheaper Taichi frontend, applied after ti.init): the same run with
+    Taichi's own position messages (TAICHI_HAIR_STOCK_POSITIONS=1) gives the same frames, bit for bit; and a
+    kernel that fails to compile still names its file, line and code."""
+    frames = []
+    for stock in ("1", "0"):
+        out = tmp_path / f"stock{stock}"
+        env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""),
+                   TAICHI_HAIR_STOCK_POSITIONS=stock)
+        proc = subprocess.run([sys.executable, "-m", "taichi_hair.cli", "simulate", "hang", "--strands", "4",
+                               "--frames", "3", "--quiet", "--out", str(out)], capture_output=True, text=True,
+                              timeout=600, env=env, cwd=ROOT)
+        assert proc.returncode == 0, proc.stderr
+        frames.append(np.load(out / "frames.npz")["positions"])
+    assert np.array_equal(frames[0], frames[1])
+    bad = tmp_path / "bad_kernel.py"
+    bad.write_text("import taichi as ti\nfrom taichi_hair.cli.common import lighter_kernel_positions\n"
+                   "ti.init(arch=ti.cpu)\nassert lighter_kernel_positions()\nf = ti.field(float, 4)\n\n"
+                   "@ti.kernel\ndef k():\n    for i in f:\n        f[i] = undefined_name + 1.0\n\nk()\n")
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run([sys.executable, str(bad)], capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode != 0
+    assert f'File "{bad}", line 10, in k' in proc.stderr and "undefined_name + 1.0" in proc.stderr, proc.stderr[-2000:]
+
+
 def test_file_outputs_with_the_same_stem_keep_their_own_sidecars(tmp_path):
     """x.usda and x.thair.npz once shared x.summary.json / x.stats.csv / x.bodies.npz and overwrote each other's:
     the sidecars are named after the whole file name."""
