@@ -184,7 +184,8 @@ def test_lighter_kernel_positions_change_no_bit_and_keep_file_and_line_in_compil
     bad.write_text("import taichi as ti\nfrom taichi_hair.cli.common import lighter_kernel_positions\n"
                    "ti.init(arch=ti.cpu)\nassert lighter_kernel_positions()\nf = ti.field(float, 4)\n\n"
                    "@ti.kernel\ndef k():\n    for i in f:\n        f[i] = undefined_name + 1.0\n\nk()\n")
-    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""),
+               TAICHI_HAIR_STOCK_POSITIONS="0")
     proc = subprocess.run([sys.executable, str(bad)], capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode != 0
     assert f'File "{bad}", line 10, in k' in proc.stderr and "undefined_name + 1.0" in proc.stderr, proc.stderr[-2000:]
