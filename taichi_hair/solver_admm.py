@@ -348,6 +348,8 @@ class SolverADMM(SolverBase):
                 # "Repeat continuous-collision detection and feasible projection on x" (Alg. 1, end).
                 con.detect_continuous(b.vertex_position_begin, state.vertex_position)
                 t0 = self._tock("continuous", t0)
+            if con.config.late_body_contacts:
+                con.detect_late_body(state.vertex_position)  # vertices the pile pushed into a body this step
             con.correct(state.vertex_position, b.vertex_position_begin, con.config.correction_iterations)
             self._update_frames(state, control)
             t0 = self._tock("correction", t0)

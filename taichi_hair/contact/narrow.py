@@ -135,6 +135,72 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
                     cb += 1
 
 
+@ti.func
+def _has_body_contact(con: ti.template(), i: ti.i32, k: ti.i32) -> bool:
+    """Does vertex i already have a contact with collider k (its CSR list of ``build_adjacency``)?"""
+    has = False
+    for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
+        if con.contact_collider[con.vertex_contact_list[e]] == k:
+            has = True
+    return has
+
+
+@ti.kernel
+def count_late_body_contacts(vertex: ti.template(), x: ti.template(), radius: ti.template(), cs: ti.template(),
+                             con: ti.template(), margin: float, out_count: ti.template()):
+    """Per free vertex: the colliders whose surface x is within r + margin of (end-of-step body transforms)
+    and that it has no contact with yet; then the exclusive prefix sum (entry n: the total)."""
+    for a in x:
+        nb = 0
+        if vertex.vertex_is_fixed[a] == 0:
+            for k in range(cs.count_field[None]):
+                if acts_on(cs, k, vertex.vertex_strand[a]):
+                    R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+                    d, n = collider_distance(cs, k, R.transpose() @ (x[a] - T))
+                    if d < radius[a] + margin and not _has_body_contact(con, a, k):
+                        nb += 1
+        out_count[a] = nb
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        n = x.shape[0]
+        run = 0
+        for i in range(n):
+            c = out_count[i]
+            out_count[i] = run
+            run += c
+        out_count[n] = run
+
+
+@ti.kernel
+def write_late_body_contacts(vertex: ti.template(), x: ti.template(), radius: ti.template(), cs: ti.template(),
+                             con: ti.template(), margin: float, first: ti.i32, start: ti.template()):
+    """Append the contacts ``count_late_body_contacts`` counted at index ``first`` on, in vertex order (so the
+    contact list, and with it the batches, is deterministic), up to capacity; contact_count gets the total.
+    The same contact as ``write_contacts``' body contacts, taken at the end-of-step transforms."""
+    n = x.shape[0]
+    con.contact_count[None] = first + start[n]
+    cap = con.capacity
+    for a in x:
+        cb = first + start[a]
+        if vertex.vertex_is_fixed[a] == 0:
+            for k in range(cs.count_field[None]):
+                if acts_on(cs, k, vertex.vertex_strand[a]):
+                    Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+                    q = Re.transpose() @ (x[a] - Te)
+                    d, nq = collider_distance(cs, k, q)
+                    if d < radius[a] + margin and not _has_body_contact(con, a, k):
+                        if cb < cap:
+                            s_end = Re @ (q - d * nq) + Te
+                            n_end = Re @ nq
+                            con.contact_vertex[cb] = ivec4(a, -1, -1, -1)
+                            con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
+                            con.contact_normal[cb] = n_end
+                            con.contact_kinematic[cb] = -s_end - radius[a] * n_end
+                            con.contact_friction[cb] = cs.collider_friction[k]
+                            con.contact_collider[cb] = k
+                        cb += 1
+
+
 #: ``_delassus``'s third choice (after True: by batch, False: by vertex): no mass splitting (n_i = 1).
 SPLIT_NONE = 2
 

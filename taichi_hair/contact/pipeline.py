@@ -82,6 +82,9 @@ class ContactPipeline:
         self.capped_queries = 0
         self.grow_events = 0
         self.detections = 0
+        #: Body contacts added before the correction (``detect_late_body``) in the current step; their field.
+        self.late_body_contacts = 0
+        self._late_count = None
 
     def set_coefficients(self) -> None:
         """(Re)compute the per-vertex contact coefficients from the Model (after an in-place Model update)."""
@@ -175,7 +178,8 @@ class ContactPipeline:
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                         dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH)
         self.detections += 1
-        # Per-step statistics of the continuous passes of this step.
+        # Per-step statistics of the continuous passes and the late body contacts of this step.
+        self.late_body_contacts = 0
         self.continuous_contacts = 0
         self.capped_queries = 0
         self.ccd_skipped = 0
@@ -220,6 +224,37 @@ class ContactPipeline:
             build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                             self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == MassSplitting.BATCH)
         self.continuous_contacts += added
+        return added
+
+    def detect_late_body(self, x) -> int:
+        """Body contacts for the vertices that reached a collider during the step's iterations without one
+        (``ContactConfig.late_body_contacts``), appended before the end-of-step correction; returns how many.
+
+        The step's detection gives a vertex a body contact when its own motion (|v| dt + |g| dt^2) may bring
+        it within reach; the hair of a dense pile can push it further within the step."""
+        from .narrow import count_late_body_contacts, write_late_body_contacts
+
+        if self.colliders.count == 0:
+            return 0
+        m, con = self.model, self.con
+        if self._late_count is None:
+            self._late_count = ti.field(ti.i32, m.vertex_count + 1)
+        count_late_body_contacts(m.vertex, x, self.vertex_radius, self.colliders, con, self.config.margin,
+                                 self._late_count)
+        added = int(self._late_count[m.vertex_count])
+        if added == 0:
+            return 0
+        first = self.contact_count
+        while True:
+            write_late_body_contacts(m.vertex, x, self.vertex_radius, self.colliders, self.con, self.config.margin,
+                                     first, self._late_count)
+            total = int(self.con.contact_count[None])
+            if total <= self.con.capacity:
+                break
+            self._grow_contacts(total, keep=first)
+        build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
+                        self._dt, self._gn, self._dynamic, first, self.config.mass_splitting == MassSplitting.BATCH)
+        self.late_body_contacts += added
         return added
 
     def _strands_apart(self, x, margin: float, sweep: float, fall: float) -> bool:
@@ -431,7 +466,8 @@ class ContactPipeline:
                 "hair_penetration_p99_m": p99, "crossed_pairs": int(o[5]),
                 "correction_sweeps": self.correction_sweeps_last,
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
-                "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped}
+                "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped,
+                "late_body_contacts": self.late_body_contacts}
 
 
 #: The end-of-step correction's "rest" lengths take the rest length for the length: warn when a material
