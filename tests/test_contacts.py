@@ -219,10 +219,9 @@ def test_a_strand_through_a_spheres_centre_is_pushed_out_without_nan():
 def test_a_vertex_pushed_into_a_body_within_the_step_gets_a_contact_and_is_pushed_out(late):
     """ContactConfig.late_body_contacts: the step's detection finds no body contact for a strand 1 cm above a
     sphere; then (as the hair of a dense pile does within a substep) the strand is pushed down until vertex 5
-    is 0.5 mm inside it.  With
-    the late detection it gets a contact and the end-of-step correction pushes it out (to within 0.1 mm of
-    the surface); without, nothing acts on it and it stays 0.5 mm inside (what the 4,000-strand hairball
-    showed, BENCHMARKS.md)."""
+    is 0.5 mm inside it.  With the late detection it gets a contact and the end-of-step correction pushes it
+    out (to within 0.1 mm of the surface); without, nothing acts on it and it stays 0.5 mm inside (what the
+    4,000-strand hairball showed, BENCHMARKS.md)."""
     b = GroomBuilder()
     b.add_strand(line((0, 0, 0), (0.1, 0, 0), 11), HAIR, root="free")
     model = b.finalize()
