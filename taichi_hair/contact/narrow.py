@@ -196,7 +196,9 @@ def write_late_body_contacts(vertex: ti.template(), x: ti.template(), radius: ti
                             con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
                             con.contact_normal[cb] = n_end
                             con.contact_kinematic[cb] = -s_end - radius[a] * n_end
-                            con.contact_friction[cb] = cs.collider_friction[k]
+                            # Frictionless: where the vertex first touched the body within the step is not
+                            # known, so there is no slip to resist; the contact only pushes it out.
+                            con.contact_friction[cb] = 0.0
                             con.contact_collider[cb] = k
                         cb += 1
 
