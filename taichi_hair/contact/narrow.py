@@ -32,7 +32,7 @@ contact is ever dropped silently.
 import taichi as ti
 
 from .colliders import acts_on, body_transform, collider_distance
-from .grid import contact_normal, row_holds, segment_closest_points
+from .grid import contact_normal, exclusive_scan, row_holds, segment_closest_points
 from .projection import BATCHES
 
 vec3 = ti.math.vec3
@@ -145,30 +145,34 @@ def _has_body_contact(con: ti.template(), i: ti.i32, k: ti.i32) -> bool:
     return has
 
 
+@ti.func
+def _late_body_hit(vertex: ti.template(), x: ti.template(), radius: ti.template(), cs: ti.template(),
+                   con: ti.template(), margin: float, a: ti.i32, k: ti.i32):
+    """Does free vertex a need a late contact with collider k (within r + margin of it at the end-of-step
+    transforms, and no contact with it yet)?  Also returns the body point and normal at the end of the step."""
+    Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+    q = Re.transpose() @ (x[a] - Te)
+    d, nq = collider_distance(cs, k, q)
+    hit = (vertex.vertex_is_fixed[a] == 0 and acts_on(cs, k, vertex.vertex_strand[a]) and d < radius[a] + margin
+           and not _has_body_contact(con, a, k))
+    return hit, Re @ (q - d * nq) + Te, Re @ nq
+
+
 @ti.kernel
 def count_late_body_contacts(vertex: ti.template(), x: ti.template(), radius: ti.template(), cs: ti.template(),
                              con: ti.template(), margin: float, out_count: ti.template()):
-    """Per free vertex: the colliders whose surface x is within r + margin of (end-of-step body transforms)
-    and that it has no contact with yet; then the exclusive prefix sum (entry n: the total)."""
+    """Per vertex: the colliders it needs a late contact with (``_late_body_hit``); then the exclusive prefix
+    sum (entry n: the total)."""
     for a in x:
         nb = 0
-        if vertex.vertex_is_fixed[a] == 0:
-            for k in range(cs.count_field[None]):
-                if acts_on(cs, k, vertex.vertex_strand[a]):
-                    R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
-                    d, n = collider_distance(cs, k, R.transpose() @ (x[a] - T))
-                    if d < radius[a] + margin and not _has_body_contact(con, a, k):
-                        nb += 1
+        for k in range(cs.count_field[None]):
+            hit, s_end, n_end = _late_body_hit(vertex, x, radius, cs, con, margin, a, k)
+            if hit:
+                nb += 1
         out_count[a] = nb
     ti.loop_config(serialize=True)
     for _ in range(1):
-        n = x.shape[0]
-        run = 0
-        for i in range(n):
-            c = out_count[i]
-            out_count[i] = run
-            run += c
-        out_count[n] = run
+        exclusive_scan(out_count, x.shape[0])
 
 
 @ti.kernel
@@ -176,31 +180,25 @@ def write_late_body_contacts(vertex: ti.template(), x: ti.template(), radius: ti
                              con: ti.template(), margin: float, first: ti.i32, start: ti.template()):
     """Append the contacts ``count_late_body_contacts`` counted at index ``first`` on, in vertex order (so the
     contact list, and with it the batches, is deterministic), up to capacity; contact_count gets the total.
-    The same contact as ``write_contacts``' body contacts, taken at the end-of-step transforms."""
+    The same contact as ``write_contacts``' body contacts, taken at the end-of-step transforms, and
+    frictionless: where the vertex first touched the body within the step is not known, so there is no slip
+    to resist; the contact only pushes it out."""
     n = x.shape[0]
     con.contact_count[None] = first + start[n]
     cap = con.capacity
     for a in x:
         cb = first + start[a]
-        if vertex.vertex_is_fixed[a] == 0:
-            for k in range(cs.count_field[None]):
-                if acts_on(cs, k, vertex.vertex_strand[a]):
-                    Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
-                    q = Re.transpose() @ (x[a] - Te)
-                    d, nq = collider_distance(cs, k, q)
-                    if d < radius[a] + margin and not _has_body_contact(con, a, k):
-                        if cb < cap:
-                            s_end = Re @ (q - d * nq) + Te
-                            n_end = Re @ nq
-                            con.contact_vertex[cb] = ivec4(a, -1, -1, -1)
-                            con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
-                            con.contact_normal[cb] = n_end
-                            con.contact_kinematic[cb] = -s_end - radius[a] * n_end
-                            # Frictionless: where the vertex first touched the body within the step is not
-                            # known, so there is no slip to resist; the contact only pushes it out.
-                            con.contact_friction[cb] = 0.0
-                            con.contact_collider[cb] = k
-                        cb += 1
+        for k in range(cs.count_field[None]):
+            hit, s_end, n_end = _late_body_hit(vertex, x, radius, cs, con, margin, a, k)
+            if hit:
+                if cb < cap:
+                    con.contact_vertex[cb] = ivec4(a, -1, -1, -1)
+                    con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
+                    con.contact_normal[cb] = n_end
+                    con.contact_kinematic[cb] = -s_end - radius[a] * n_end
+                    con.contact_friction[cb] = 0.0
+                    con.contact_collider[cb] = k
+                cb += 1
 
 
 #: ``_delassus``'s third choice (after True: by batch, False: by vertex): no mass splitting (n_i = 1).
