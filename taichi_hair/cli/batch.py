@@ -118,7 +118,8 @@ def run_task(name: str, argv: list) -> dict:
         try:
             args = simulate_parser().parse_args(full)
         except (argparse.ArgumentError, SystemExit) as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            if isinstance(exc, argparse.ArgumentError):  # (argparse printed a SystemExit's message itself)
+                print(f"error: {exc}", file=sys.stderr)
             rc = 2
         else:
             from .common import run_guarded
@@ -161,7 +162,8 @@ def run_pack_task(names: list, argvs: list) -> list:
         with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
             try:
                 codes = _run_pack([argvs[i] for i in packed])
-            except Exception as exc:  # noqa: BLE001 - PackRefused, or anything: the runs then go one by one
+            except (Exception, SystemExit) as exc:  # noqa: BLE001 - PackRefused, a bad argument, anything: the
+                # runs then go one by one, each reporting its own error
                 print(f"note: not packed ({type(exc).__name__}: {exc}); running each run alone")
         wall = time.perf_counter() - t0
         log = buf.getvalue()
