@@ -200,10 +200,10 @@ def test_runs_that_differ_only_in_their_grooms_share_a_pack():
              BatchRun("m2", "x.toml", {}, {"material.youngs_modulus": 2e9, "groom.seed": 3}),
              BatchRun("f1", "x.toml", {}, {"solver.contacts.friction": 0.1})]
     names = [r.name for r in runs]
-    tasks = pack_groups(runs, {}, names, workers=1, pack=0)
+    tasks = pack_groups(runs, names, workers=1, pack=0)
     assert tasks == [["s0", "s1", "s2", "s3"], ["i5"], ["m1", "m2"], ["f1"]]
-    assert pack_groups(runs, {}, names, workers=4, pack=0)[:2] == [["s0", "s1"], ["s2", "s3"]]  # 8 runs / 4
-    assert all(len(t) == 1 for t in pack_groups(runs, {}, names, workers=1, pack=1))
+    assert pack_groups(runs, names, workers=4, pack=0)[:2] == [["s0", "s1"], ["s2", "s3"]]  # 8 runs / 4
+    assert all(len(t) == 1 for t in pack_groups(runs, names, workers=1, pack=1))
 
 
 def _descendants(pid):

@@ -210,7 +210,7 @@ def _run_pack(argvs: list) -> list:
     return PackedSimulate(runs).run()
 
 
-def pack_groups(runs: list, argvs: dict, todo: list, workers: int, pack: int) -> list:
+def pack_groups(runs: list, todo: list, workers: int, pack: int) -> list:
     """The tasks of a batch: lists of run names.  Runs whose simulate arguments differ only in
     ``PACK_NEUTRAL_OPTIONS`` and ``PACK_NEUTRAL_SETS`` keys share a group; a group is cut into packs of at most
     ``pack`` runs (0: auto, the runs to do spread evenly over the workers; 1: no packing)."""
@@ -331,7 +331,7 @@ def cmd_batch(args) -> int:
         try:
             if client.has_dashboard and client.dashboard_link and not args.quiet:
                 print(f"Dask dashboard: {client.dashboard_link}", flush=True)
-            tasks = pack_groups(runs, argvs, todo, args.workers, args.pack)
+            tasks = pack_groups(runs, todo, args.workers, args.pack)
             futures = {client.submit(run_pack_task, names, [argvs[n] for n in names],
                                      key=f"runs-{names[0]}-{len(names)}-{time.time_ns()}", pure=False): names
                        for names in tasks}

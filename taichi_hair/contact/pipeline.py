@@ -82,9 +82,12 @@ class ContactPipeline:
         self.capped_queries = 0
         self.grow_events = 0
         self.detections = 0
-        #: Body contacts added before the correction (``detect_late_body``) in the current step; their field.
+        #: Body contacts added before the correction (``detect_late_body``) in the current step, and its
+        #: per-vertex counts [-], shape (vertex_count + 1,): allocated here when ``late_body_contacts`` is on and
+        #: there are colliders (so a step allocates nothing; a direct call allocates it then).
         self.late_body_contacts = 0
-        self._late_count = None
+        self._late_count = (ti.field(ti.i32, n + 1) if config.late_body_contacts and self.colliders.count > 0
+                            else None)
 
     def set_coefficients(self) -> None:
         """(Re)compute the per-vertex contact coefficients from the Model (after an in-place Model update)."""
