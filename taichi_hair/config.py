@@ -269,9 +269,11 @@ class ContactConfig:
             cannot push them out.  Measured (hairball, 4,000 strands, frames 10-11, a scratch probe): every
             vertex found more than 0.5 mm inside the ball had no body contact in that step and had been
             2.7-9.8 mm outside at its beginning; with this on, none in frames 9-12.  The late contacts are
-            frictionless (where the vertex first touched the body within the step is not known).  Off by
-            default, opt-in: with it the grooming comb test's drag of one strand by a tooth sliding with
-            mu = 0.8 went from 0.11 mm to 0 (the other strand's 0.88 mm unchanged), not explained yet [-].
+            frictionless (where the vertex first touched the body within the step is not known), so they are
+            kept for what the step's detection cannot foresee: its reach includes the vertex's own motion
+            and, since the comb's case below, the body's motion at the vertex.  (Before that a comb tooth
+            swept 1 mm per step met vertices without a contact every step; frictionless late contacts then
+            let a strand slip off the tooth, which is why this was off by default for a while.) [-].
 
     Collision weights follow the paper: W_z = m / dt~^2 with
     dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)).  For short edges of
@@ -302,7 +304,7 @@ class ContactConfig:
     correction_chebyshev_rho: float = 0.99
     skip_when_apart: bool = True
     skip_slow_continuous: bool = True
-    late_body_contacts: bool = False
+    late_body_contacts: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):

@@ -12,10 +12,11 @@ colliders of :mod:`taichi_hair.contact.colliders`, build the contact list:
   thickness r = r_a + r_b and u_kin = -r n, so that u = H x + u_kin has normal
   component n . (p_a - p_b) - r (the gap, with the begin-of-step normal) and
   tangential component the relative slip since the beginning of the step.
-* body: each free vertex within r + margin of a collider (at the
-  begin-of-step body transform) gets a contact with h = 1 against the body
-  surface point s, carried rigidly to the end-of-step transform:
-  u = x - s_end - r n_end.
+* body: each free vertex within reach of a collider (at the begin-of-step
+  body transform; the reach is r + margin + the vertex's own motion allowance +
+  how far the body moves at that point within the step) gets a contact with
+  h = 1 against the body surface point s, carried rigidly to the end-of-step
+  transform: u = x - s_end - r n_end.
 
 Then the vertex-to-contact adjacency (CSR, each list sorted by batch then index, so the
 projection sums in a fixed order, bitwise deterministic, and reads a batch's entries alone), the collision weights
@@ -51,6 +52,28 @@ def _emits(grid: ti.template(), a: ti.i32, k: ti.i32) -> bool:
     return a < b or not _in_list(grid, b, a)
 
 
+@ti.func
+def _body_reach(cs: ti.template(), k: ti.i32, p):
+    """Point p [m] in collider k's body frame at the begin-of-step transform, its signed distance to the collider
+    [m] and the outward normal there (body frame)."""
+    R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[k])
+    q = R.transpose() @ (p - T)
+    d, nq = collider_distance(cs, k, q)
+    return q, d, nq
+
+
+@ti.func
+def _body_sweep(cs: ti.template(), k: ti.i32, q) -> float:
+    """How far collider k's body carries its point q (body frame) from the begin- to the end-of-step
+    transform [m]: the reach a vertex needs for a body that moves into it within the step (a comb tooth
+    swept 1 mm per step reaches vertices 1 mm away).  The motion is given, so all of it is added, not a
+    ``velocity_margin`` share of it; zero for a still body."""
+    b = cs.collider_body[k]
+    Rb, Tb = body_transform(cs.body_rotation_begin, cs.body_translation_begin, b)
+    Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, b)
+    return ((Re @ q + Te) - (Rb @ q + Tb)).norm()
+
+
 @ti.kernel
 def count_contacts(vertex: ti.template(), x: ti.template(), v: ti.template(), radius: ti.template(),
                    grid: ti.template(), cs: ti.template(), margin: float, sweep: float, fall: float):
@@ -65,9 +88,8 @@ def count_contacts(vertex: ti.template(), x: ti.template(), v: ti.template(), ra
         if vertex.vertex_is_fixed[a] == 0:
             for k in range(cs.count_field[None]):
                 if acts_on(cs, k, vertex.vertex_strand[a]):
-                    R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, cs.collider_body[k])
-                    d, n = collider_distance(cs, k, R.transpose() @ (x[a] - T))
-                    if d < radius[a] + margin + sweep * v[a].norm() + fall:
+                    q, d, nq = _body_reach(cs, k, x[a])
+                    if d < radius[a] + margin + sweep * v[a].norm() + fall + _body_sweep(cs, k, q):
                         nb += 1
         grid.vertex_body_emit_count[a] = nb
     # Exclusive prefix sums in place (serial; one pass over the vertices); entry n gets the total.
@@ -117,13 +139,11 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
         if vertex.vertex_is_fixed[a] == 0:
             cb = n_hair + grid.vertex_body_emit_count[a]
             for k in range(cs.count_field[None]):
-                body = cs.collider_body[k]
-                R, T = body_transform(cs.body_rotation_begin, cs.body_translation_begin, body)
-                q = R.transpose() @ (x[a] - T)
-                d, nq = collider_distance(cs, k, q)
-                if d < radius[a] + margin + sweep * v[a].norm() + fall and acts_on(cs, k, vertex.vertex_strand[a]):
+                q, d, nq = _body_reach(cs, k, x[a])
+                if (d < radius[a] + margin + sweep * v[a].norm() + fall + _body_sweep(cs, k, q)
+                        and acts_on(cs, k, vertex.vertex_strand[a])):
                     if cb < cap:
-                        Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, body)
+                        Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
                         s_end = Re @ (q - d * nq) + Te
                         n_end = Re @ nq
                         con.contact_vertex[cb] = ivec4(a, -1, -1, -1)
