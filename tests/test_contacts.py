@@ -246,6 +246,33 @@ def test_a_vertex_pushed_into_a_body_within_the_step_gets_a_contact_and_is_pushe
         assert depth > 4e-4, depth
 
 
+@pytest.mark.parametrize("lift", [0.0, 0.001], ids=["still", "moving_1mm"])
+def test_a_body_moving_into_hair_within_the_step_gets_its_frictional_contact_at_detection(lift):
+    """A body contact's reach adds how far the body carries its nearest point within the step.  A strand
+    rests 0.5 mm (+ r) above a sphere's top; quasistatic detection (no velocity reach): the still sphere gives
+    no contact (0.5 mm + r > r + margin), the sphere lifted 1 mm in the step gives the closest vertex a
+    contact with the sphere's friction (before, none: the comb of tests/test_grooming.py met hair without a
+    contact and lost its drag)."""
+    b = GroomBuilder()
+    b.add_strand(line((-0.01, 0.0205 + R, 0), (0.01, 0.0205 + R, 0), 11), HAIR, root="free")
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    solver = _solver(model, [SphereCollider(center=(0.0, 0.0, 0.0), radius=0.02, friction=0.7, body=0)],
+                     hair_hair=False)
+    pipe = solver.contacts
+    pipe.colliders.begin_step(ctl)                             # the first step: no motion
+    ctl.set_body_transform(0, np.eye(3), (0.0, lift, 0.0))
+    pipe.colliders.begin_step(ctl)                             # this step: lifted by `lift`
+    pipe.detect(st, 1 / 96, (0.0, 0.0, 0.0), False)
+    if lift == 0.0:
+        assert pipe.contact_count == 0
+    else:
+        assert pipe.contact_count >= 1
+        fr = pipe.con.contact_friction.to_numpy()[:pipe.contact_count]
+        assert np.allclose(fr, 0.7), fr
+        assert 5 in pipe.con.contact_vertex.to_numpy()[:pipe.contact_count, 0]  # the vertex over the top
+
+
 def test_incline_sticks_below_the_friction_angle_and_slides_with_coulomb_acceleration_above():
     mu = 0.4
     steps, dt = 48, 1 / 240
