@@ -61,6 +61,12 @@ class CorrectionLengths(StrEnum):
     FREE = "free"
 
 
+class CorrectionEdgeOrder(StrEnum):
+    AUTO = "auto"
+    COLOURS = "colours"
+    STRANDS = "strands"
+
+
 class MassSplitting(StrEnum):
     BATCH = "batch"
     VERTEX = "vertex"
@@ -202,6 +208,14 @@ class ContactConfig:
             step of dense, fast contact 20-40 % of the hair pairs have crossed
             by 0.1-2 mm; pushing them back by their contact vertices alone
             stretched the edges beside them by up to 18 % [-].
+        correction_edge_order: how each correction sweep passes over the edge lengths it holds.
+            ``"colours"``: the edges of even, then odd local index, each set in parallel (a push travels
+            one edge per sweep); ``"strands"``: root to tip and back along each strand, one strand per
+            thread (a symmetric Gauss-Seidel pass: a push travels the whole strand in one sweep);
+            ``"auto"`` (default): strands on a CPU, colours on a GPU (one thread per element), as the
+            solver's schedule.  Measured on the CPU (2026-12-04, BENCHMARKS.md): the hairball's strain
+            p99 / max 0.074 / 0.65 % -> 0.008 / 0.13 % (300 strands) and 0.014 / 0.17 % -> 0.000 / 0.05 %
+            (1,000), hair-pair penetration about the same, the correction's time the same at 1,000 [-].
         correction_max_iterations: after its ``correction_iterations`` sweeps the correction goes on, 5
             sweeps at a time, while a contact is still deeper than ``correction_tolerance``, up to this
             many sweeps in all (equal to ``correction_iterations``: the paper's fixed count) [-].
@@ -296,6 +310,7 @@ class ContactConfig:
     mass_splitting: MassSplitting = MassSplitting.BATCH
     relinearize_correction: bool = True
     correction_lengths: CorrectionLengths = CorrectionLengths.REST
+    correction_edge_order: CorrectionEdgeOrder = CorrectionEdgeOrder.AUTO
     correction_max_iterations: int = 80
     correction_tolerance: float = 0.0
     correction_relinearize_every: int = 10
@@ -326,6 +341,8 @@ class ContactConfig:
                              f"{self.correction_max_iterations!r}")
         self.correction_lengths = as_choice(CorrectionLengths, "ContactConfig", "correction_lengths",
                                             self.correction_lengths)
+        self.correction_edge_order = as_choice(CorrectionEdgeOrder, "ContactConfig", "correction_edge_order",
+                                               self.correction_edge_order)
         self.correction_mass_splitting = as_choice(MassSplitting, "ContactConfig", "correction_mass_splitting",
                                                    self.correction_mass_splitting)
         if not isinstance(self.correction_hair_friction, bool):

@@ -64,7 +64,7 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from .solver_base import SolverBase
+from .solver_base import SolverBase, on_gpu
 from . import admm
 from .anderson import (ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_auto_window, anderson_begin,
                        anderson_mix)
@@ -87,7 +87,6 @@ PRESTRESS_WEIGHT = 400.0
 #: before the loop under "frames").
 STAGES = ("detection", "continuous", "begin", "local", "projection", "global", "frames", "twist", "anderson",
           "iterations", "correction", "end")
-_GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")  # finite-check order
 
 
@@ -129,8 +128,7 @@ class SolverADMM(SolverBase):
         #: What the solver chose to model and why, by topic ("twist"; "contacts" with contacts), for reports.
         self.model_choices = {}
         self._set_coefficients()
-        arch = ti.lang.impl.current_cfg().arch
-        gpu = arch in _GPU_ARCHS
+        gpu = on_gpu()
         schedule = cfg.schedule
         if schedule == Schedule.AUTO:
             schedule = Schedule.STAGE if gpu or cfg.tridiagonal == Tridiagonal.PCR else Schedule.STRAND

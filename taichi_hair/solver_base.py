@@ -23,6 +23,15 @@ import taichi as ti
 from .errors import SimulationDivergedError
 
 
+#: Taichi arches that run kernels on a GPU (where the "auto" choices pick the per-element stage layouts).
+GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
+
+
+def on_gpu() -> bool:
+    """Does the current Taichi runtime run on a GPU (``ti.init``'s arch in :data:`GPU_ARCHS`)?"""
+    return ti.lang.impl.current_cfg().arch in GPU_ARCHS
+
+
 class SolverBase:
     """Base of SolverADMM, SolverShape and SolverXPBD (see the module docstring)."""
 

@@ -8,7 +8,8 @@ and grown when the contact count overflows.
 import numpy as np
 import taichi as ti
 
-from ..config import CorrectionLengths, MassSplitting
+from ..config import CorrectionEdgeOrder, CorrectionLengths, MassSplitting
+from ..solver_base import on_gpu
 
 from .narrow import SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts, write_contacts
 
@@ -352,6 +353,8 @@ class ContactPipeline:
         m = self.model
         cfg = self.config
         hold = cfg.correction_lengths != CorrectionLengths.FREE
+        along = (cfg.correction_edge_order == CorrectionEdgeOrder.STRANDS
+                 or (cfg.correction_edge_order == CorrectionEdgeOrder.AUTO and not on_gpu()))
         split = {MassSplitting.BATCH: True, MassSplitting.VERTEX: False, MassSplitting.NONE: SPLIT_NONE}[
             cfg.correction_mass_splitting]
         frictionless = not cfg.correction_hair_friction
@@ -373,7 +376,7 @@ class ContactPipeline:
         target = sweeps
         while target > 0:
             if hold:
-                correction_sweep(m.vertex, m.edge, self.con, self.edge_held_length)
+                correction_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along)
             else:
                 projection_sweep(self.con)
             done += 1
@@ -391,7 +394,7 @@ class ContactPipeline:
                     # run before the depth check, so the check sees what the correction would return (they
                     # re-open contacts: p99 12 -> 36 um, measured on the hairball, when they ran after it).
                     for _ in range(_FINAL_EDGE_PASSES):
-                        hold_lengths_sweep(m.vertex, m.edge, self.con, self.edge_held_length)
+                        hold_lengths_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along)
                 if done >= cap:
                     break
                 # Past the fixed sweeps, go on in groups of 5 while a contact is deeper than the tolerance.

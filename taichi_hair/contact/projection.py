@@ -185,25 +185,59 @@ def end_correction(vertex: ti.template(), x: ti.template(), con: ti.template()):
 
 
 @ti.func
-def hold_edge_lengths(vertex: ti.template(), edge: ti.template(), z: ti.template(), length: ti.template(),
-                      colour: ti.template()):
-    """Project the edges of one colour (local edge index parity) back to their held lengths, mass-weighted.
+def _hold_edge(vertex: ti.template(), edge: ti.template(), z: ti.template(), length: ti.template(), j: ti.i32):
+    """Project edge j back to its held length, mass-weighted.
 
     Edge j joins vertices j and j+1; C = |z_{j+1} - z_j| - l_j moves them along the edge by
     w_j / (w_j + w_{j+1}) C and w_{j+1} / (w_j + w_{j+1}) C, with w = 1/m (0 on kinematic vertices), the
-    position-based projection of an inextensibility constraint (Mueller et al. 2007).  Edges of one
-    colour share no vertex, so they are projected in parallel without atomics (bitwise reproducible).
+    position-based projection of an inextensibility constraint (Mueller et al. 2007).
     """
+    if edge.edge_rest_length[j] > 0.0:
+        wa = 0.0 if vertex.vertex_is_fixed[j] != 0 else 1.0 / vertex.vertex_mass[j]
+        wb = 0.0 if vertex.vertex_is_fixed[j + 1] != 0 else 1.0 / vertex.vertex_mass[j + 1]
+        d = z[j + 1] - z[j]
+        dn = d.norm()
+        if wa + wb > 0.0 and dn > 0.0:
+            corr = ((dn - length[j]) / ((wa + wb) * dn)) * d
+            z[j] += wa * corr
+            z[j + 1] -= wb * corr
+
+
+@ti.func
+def hold_edge_lengths(vertex: ti.template(), edge: ti.template(), z: ti.template(), length: ti.template(),
+                      colour: ti.template()):
+    """Project the edges of one colour (local edge index parity) back to their held lengths (``_hold_edge``).
+    Edges of one colour share no vertex, so they are projected in parallel without atomics (bitwise
+    reproducible)."""
     for j in z:
-        if edge.edge_rest_length[j] > 0.0 and vertex.vertex_local_index[j] % 2 == colour:
-            wa = 0.0 if vertex.vertex_is_fixed[j] != 0 else 1.0 / vertex.vertex_mass[j]
-            wb = 0.0 if vertex.vertex_is_fixed[j + 1] != 0 else 1.0 / vertex.vertex_mass[j + 1]
-            d = z[j + 1] - z[j]
-            dn = d.norm()
-            if wa + wb > 0.0 and dn > 0.0:
-                corr = ((dn - length[j]) / ((wa + wb) * dn)) * d
-                z[j] += wa * corr
-                z[j + 1] -= wb * corr
+        if vertex.vertex_local_index[j] % 2 == colour:
+            _hold_edge(vertex, edge, z, length, j)
+
+
+@ti.func
+def hold_strand_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.template(), z: ti.template(),
+                        length: ti.template()):
+    """Project every edge back to its held length (``_hold_edge``) root to tip and then tip to root, one
+    strand per thread (bitwise reproducible): a symmetric Gauss-Seidel pass that carries a contact's push
+    along the whole strand in one sweep, where the two colours carry it one edge per sweep."""
+    for s in strand.strand_vertex_start:
+        start = strand.strand_vertex_start[s]
+        m = strand.strand_vertex_count[s]
+        for k in range(m - 1):
+            _hold_edge(vertex, edge, z, length, start + k)
+        for k in range(m - 1):
+            _hold_edge(vertex, edge, z, length, start + m - 2 - k)
+
+
+@ti.func
+def hold_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.template(), z: ti.template(),
+                 length: ti.template(), along_strands: ti.template()):
+    """One pass of the edge lengths: along each strand (``hold_strand_lengths``) or both colours."""
+    if ti.static(along_strands):
+        hold_strand_lengths(vertex, edge, strand, z, length)
+    else:
+        for colour in ti.static(range(2)):
+            hold_edge_lengths(vertex, edge, z, length, colour)
 
 
 @ti.kernel
@@ -295,8 +329,10 @@ def projection_sweep(con: ti.template()):
 
 
 @ti.kernel
-def correction_sweep(vertex: ti.template(), edge: ti.template(), con: ti.template(), length: ti.template()):
-    """One sweep of the length-holding geometric correction: the 8 contact batches, then both edge colours.
+def correction_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.template(), con: ti.template(),
+                     length: ti.template(), along_strands: ti.template()):
+    """One sweep of the length-holding geometric correction: the 8 contact batches, then the edge lengths
+    (``hold_lengths``).
 
     A Gauss-Seidel pass over contacts and inextensibility together, so a crossed pair pushed back drags
     its strands' neighbouring vertices along instead of stretching the edges at the contact.
@@ -304,8 +340,7 @@ def correction_sweep(vertex: ti.template(), edge: ti.template(), con: ti.templat
     for batch in ti.static(range(BATCHES)):
         solve_batch_contacts(con, con.vertex_z, batch)
         apply_batch_corrections(con, con.vertex_z, batch)
-    for colour in ti.static(range(2)):
-        hold_edge_lengths(vertex, edge, con.vertex_z, length, colour)
+    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands)
 
 
 @ti.kernel
@@ -321,10 +356,10 @@ def projection_end(x: ti.template(), con: ti.template(), buf: ti.template()):
 
 
 @ti.kernel
-def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), con: ti.template(), length: ti.template()):
-    """Both edge colours once more, after the last contact sweep of the correction."""
-    for colour in ti.static(range(2)):
-        hold_edge_lengths(vertex, edge, con.vertex_z, length, colour)
+def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.template(), con: ti.template(),
+                       length: ti.template(), along_strands: ti.template()):
+    """The edge lengths once more (``hold_lengths``), after the last contact sweep of the correction."""
+    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands)
 
 
 @ti.kernel

@@ -97,7 +97,7 @@ import taichi as ti
 from . import constraints as xc
 from ...admm import find_non_finite
 from ...config import Schedule, as_choice
-from ...solver_base import SolverBase
+from ...solver_base import SolverBase, on_gpu
 from ...frames import update_reference_frames
 from ...model import Model, _np_float
 from ...rotation import quat_conjugate_np, quat_from_matrix_np, quat_mul_np
@@ -114,7 +114,6 @@ FRAME_INERTIAS = tuple(m.value for m in FrameInertia)
 #: Up to this many iterations a substep is one kernel launch with the sweeps unrolled (compile time grows
 #: with the count); beyond, one launch per sweep.
 _FUSED_ITERATIONS = 2
-_GPU_ARCHS = (ti.cuda, ti.vulkan, ti.metal, ti.opengl, ti.amdgpu)
 SCHEDULES = tuple(m.value for m in Schedule)
 _FIELD_NAMES = ("vertex_position", "vertex_velocity", "edge_twist", "edge_angular_velocity")
 
@@ -263,7 +262,7 @@ class SolverXPBD(SolverBase):
             raise ValueError(f"SolverXPBD: config must be a SolverXPBDConfig, got {type(self.config).__name__}")
         schedule = self.config.schedule
         if schedule == Schedule.AUTO:
-            schedule = Schedule.STAGE if ti.lang.impl.current_cfg().arch in _GPU_ARCHS else Schedule.STRAND
+            schedule = Schedule.STAGE if on_gpu() else Schedule.STRAND
         #: Resolved schedule: "stage" (one launch per substep, parallel over vertices) or "strand".
         self.schedule = schedule
         self.buf = XPBDBuffers(model.vertex_count)
