@@ -1,8 +1,12 @@
 """The stability atlas for ADMM variants given on the command line (issue 12 item 5: w0 and Anderson window).
 
 Run from the repository root:
-    python3 benchmarks/probes/atlas_variants.py KNOBS SPEC [SPEC ...]
+    python3 benchmarks/probes/atlas_variants.py [--dts 24,96,384] KNOBS SPEC [SPEC ...]
     e.g. python3 benchmarks/probes/atlas_variants.py 10,50 '{"w0": 1.0, "anderson_window": 5}' '{"w0": 2.0}'
+         python3 benchmarks/probes/atlas_variants.py --dts 24 10,50 '{"w0": 0.5, "anderson_window": 5}' \
+             '{"w0": 0.5, "anderson_window": 0}'
+
+--dts: the steps as 1/dt (default the study's 24, 96, 384).
 
 KNOBS: comma-separated iteration counts per step (the study uses 2,10,50); each SPEC a JSON object of
 ``SolverADMMConfig`` fields (up to four).  Runs ``taichi_hair.bench.stability.run_atlas`` (dt 1/24, 1/96,
@@ -17,6 +21,10 @@ import sys
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    dts = (1 / 24, 1 / 96, 1 / 384)
+    if argv[:1] == ["--dts"] and len(argv) > 1:
+        dts = tuple(1.0 / float(d) for d in argv[1].split(","))
+        argv = argv[2:]
     if len(argv) < 2:
         print(__doc__)
         return 2
@@ -31,7 +39,7 @@ def main(argv=None) -> int:
     names = ("admm", "admm_w1", "admm_aa", "admm_bdf2")[:len(specs)]
     for name, spec in zip(names, specs):
         methods.ADMM_VARIANTS[name] = spec
-    cells = S.run_atlas(methods=names, knobs={n: knobs for n in names})
+    cells = S.run_atlas(methods=names, dts=dts, knobs={n: knobs for n in names})
     for name, spec in zip(names, specs):
         cs = [c for c in cells if c.method == name]
         counts = " / ".join(f"{sum(c.label == lab for c in cs)} {lab}" for lab in ("ok", "wrong", "unstable"))
