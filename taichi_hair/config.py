@@ -215,7 +215,8 @@ class ContactConfig:
             ``"auto"`` (default): strands on a CPU, colours on a GPU (one thread per element), as the
             solver's schedule.  Measured on the CPU (2026-12-04, BENCHMARKS.md): the hairball's strain
             p99 / max 0.074 / 0.65 % -> 0.008 / 0.13 % (300 strands) and 0.014 / 0.17 % -> 0.000 / 0.05 %
-            (1,000), hair-pair penetration about the same, the correction's time the same at 1,000 [-].
+            (1,000), hair-pair penetration about the same, the time per frame within this VM's noise
+            (+-15 %; the correction itself +2 % and +19 % at 1,000 strands in two runs) [-].
         correction_max_iterations: after its ``correction_iterations`` sweeps the correction goes on, 5
             sweeps at a time, while a contact is still deeper than ``correction_tolerance``, up to this
             many sweeps in all (equal to ``correction_iterations``: the paper's fixed count) [-].
