@@ -277,8 +277,8 @@ class ContactConfig:
             the largest displacement since the beginning of the step is
             within ``margin`` (pairs out of proximity reach cannot have met;
             the README, "Model no more than a scene needs") [-].
-        late_body_contacts: before the end-of-step correction, give a body contact to every vertex that
-            ended the step's iterations within r + ``margin`` of a collider without one (issue 12).  The
+        late_body_contacts: before the end-of-step correction and at its restarts, give a body contact to
+            every vertex within r + ``margin`` of a collider without one (issue 12; ``ContactPipeline.correct``).  The
             step's detection reaches as far as a vertex's own motion; in a dense pile the hair above
             pushes vertices into the body within one substep, and without a contact the correction
             cannot push them out.  Measured (hairball, 4,000 strands, frames 10-11, a scratch probe): every

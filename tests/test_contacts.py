@@ -246,6 +246,39 @@ def test_a_vertex_pushed_into_a_body_within_the_step_gets_a_contact_and_is_pushe
         assert depth > 4e-4, depth
 
 
+def test_a_vertex_the_correction_pushes_into_a_body_gets_a_contact_and_stays_out():
+    """The end-of-step correction's own pushes can carry a vertex without a body contact into a body: the
+    hair of a dense pile pressing it down (the 16,000-strand hairball, BENCHMARKS.md: vertices 0.3-0.9 mm
+    outside the ball before the correction, inside after it, no body contact).  Here thin rod B (r = 50 um)
+    lies along z 0.2 mm above a floor's reach (no contact), thick rod A (r = 150 um, 9x the mass per length)
+    crosses it above; the step's iterations leave A's middle 3 mm below B's axis (crossed, and inside the floor:
+    A gets its late contacts).  Uncrossing pushes B down.  Claim: B gets its floor contact during the
+    correction and ends no deeper into the floor than a quarter radius (the correction's tolerance); measured
+    0.18 r.  Without it (the code before) B's axis ended 268 um below the floor, 6.4 r past touching."""
+    r, ra = 5e-5, 1.5e-4
+    yb = 2.5e-4
+    ya = yb + r + ra + 2e-5
+    b = GroomBuilder()
+    b.add_strand(line((-0.01, ya, 0.0003), (0.01, ya, 0.0003), 11), RodMaterial(radius=ra), root="free")  # A
+    b.add_strand(line((0.0003, yb, -0.01), (0.0003, yb, 0.01), 11), RodMaterial(radius=r), root="free")   # B
+    model = b.finalize()
+    st = model.state()
+    cfg = ContactConfig(friction=0.2, velocity_margin=0.0)
+    con = SolverADMM(model, SolverADMMConfig(contacts=cfg), colliders=[PlaneCollider(friction=0.0)]).contacts
+    con.detect(st, 1 / 96, (0.0, 0.0, 0.0), True)
+    assert con.contact_count == 1   # the pair; B is beyond the floor's reach r + margin
+    x0 = ti.Vector.field(3, float, model.vertex_count)
+    x0.copy_from(st.vertex_position)
+    x1 = st.positions().astype(np.float64)
+    x1[:11, 1] -= (ya - yb + 0.003) * np.exp(-(x1[:11, 0] / 0.003) ** 2)   # A's middle 3 mm below B's axis
+    st.vertex_position.from_numpy(x1.astype(np.float32))
+    assert con.detect_late_body(st.vertex_position) > 0   # A's vertices inside the floor (as step() does)
+    con.correct(st.vertex_position, x0, cfg.correction_iterations)
+    xc = st.positions().astype(np.float64)
+    assert xc[11:, 1].min() > 0.75 * r, xc[11:, 1].min()
+    assert con.statistics(st.vertex_position)["crossed_pairs"] == 0
+
+
 @pytest.mark.parametrize("lift", [0.0, 0.001], ids=["still", "moving_1mm"])
 def test_a_body_moving_into_hair_within_the_step_gets_its_frictional_contact_at_detection(lift):
     """A body contact's reach adds how far the body carries its nearest point within the step.  A strand
