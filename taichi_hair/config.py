@@ -178,6 +178,11 @@ class ContactConfig:
             vertex and a body by the factor times |v| dt + |g| dt^2 [-], so
             fast hair does not tunnel between detections (proximity detection
             runs once per step; hair moving together gets no extra margin).
+        rigid_reach: hair-hair reaches (``velocity_margin``) take the vertex velocities relative to the
+            hair's best-fit rigid motion (v0 + omega x (x - c), least squares over every vertex) instead of
+            the world's: a rigid motion changes no distance, so the bound holds as well, and the edges'
+            detection boxes no longer grow with the motion the whole groom shares (a turning head, the
+            spinning hairball).  Off: the world velocities (the paper's).
         max_contacts_per_edge: keep only the closest contacts of each edge
             (6 in the paper) [-].
         projection_iterations: Gauss-Seidel sweeps over the 8 batches per
@@ -321,6 +326,7 @@ class ContactConfig:
     skip_when_apart: bool = True
     skip_slow_continuous: bool = True
     late_body_contacts: bool = True
+    rigid_reach: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):

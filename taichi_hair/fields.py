@@ -346,6 +346,9 @@ class StrandBoxFields:
         self.strand_box_hi = ti.field(vec3, s)
         #: 1 where no two non-adjacent edges of the strand can be within reach of each other [-].
         self.strand_self_clear = ti.field(ti.i32, s)
+        #: Per-strand sums for the hair's rigid velocity fit (``grid.strand_velocity_moments``): n [-], first
+        #: vertex [m], sum r [m], sum v [m/s], sum r x v [m^2/s], sum r r^T [m^2], shape (strand_count, 22).
+        self.strand_velocity_moments = ti.field(float, (s, 22))
 
 
 class GridFields:

@@ -148,9 +148,67 @@ def bucket_of(cell, table_size: ti.i32) -> ti.i32:
 
 
 @ti.kernel
-def compute_edge_bounds(edge: ti.template(), x: ti.template(), v: ti.template(), grid: ti.template()):
+def strand_velocity_moments(strand: ti.template(), x: ti.template(), v: ti.template(), out: ti.template()):
+    """Per strand s, about its first vertex p: out[s] = (n, p, sum r, sum v, sum r x v, sum r r^T row by row)
+    with r = x - p, n its vertex count (22 numbers; :func:`rigid_velocity_fit` combines them).  Each strand's
+    sums are taken in vertex order by one thread, so the fit is deterministic."""
+    for s in strand.strand_vertex_start:
+        start = strand.strand_vertex_start[s]
+        m = strand.strand_vertex_count[s]
+        p = x[start]
+        sr = vec3(0.0)
+        sv = vec3(0.0)
+        sc = vec3(0.0)
+        sm = ti.math.mat3(0.0)
+        for k in range(m):
+            r = x[start + k] - p
+            vk = v[start + k]
+            sr += r
+            sv += vk
+            sc += r.cross(vk)
+            sm += r.outer_product(r)
+        out[s, 0] = ti.cast(m, float)
+        for j in ti.static(range(3)):
+            out[s, 1 + j] = p[j]
+            out[s, 4 + j] = sr[j]
+            out[s, 7 + j] = sv[j]
+            out[s, 10 + j] = sc[j]
+            for k in ti.static(range(3)):
+                out[s, 13 + 3 * j + k] = sm[j, k]
+
+
+def rigid_velocity_fit(moments: np.ndarray):
+    """The rigid velocity field v_ref(x) = v0 + omega x (x - c) closest to the hair's vertex velocities (least
+    squares, every vertex weighted alike) from the per-strand sums of :func:`strand_velocity_moments`, in
+    float64.  Returns (v0 [m/s], omega [rad/s], c [m]); all zero for a groom at rest (omega by least squares,
+    the minimum-norm solution where the inertia is singular, e.g. one straight strand)."""
+    a = np.asarray(moments, np.float64)
+    n, p, sr, sv, sc = a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13]
+    sm = a[:, 13:22].reshape(-1, 3, 3)
+    total = n.sum()
+    if total <= 0 or not np.any(sv) and not np.any(sc):
+        return np.zeros(3), np.zeros(3), np.zeros(3)
+    c = (n[:, None] * p + sr).sum(0) / total
+    v0 = sv.sum(0) / total
+    d = p - c  # r' = x - c = r + d per vertex; sum r' = 0
+    moment = (sc + np.cross(d, sv)).sum(0)  # sum r' x (v - v0) = sum r' x v
+    rr = (sm.sum(0) + np.einsum("si,sj->ij", sr, d) + np.einsum("si,sj->ij", d, sr)
+          + np.einsum("s,si,sj->ij", n, d, d))  # sum r' r'^T
+    inertia = np.trace(rr) * np.eye(3) - rr
+    omega = np.linalg.lstsq(inertia, moment, rcond=1e-9)[0]
+    if not np.all(np.isfinite(omega)):
+        omega = np.zeros(3)
+    return v0, omega, c
+
+
+@ti.kernel
+def compute_edge_bounds(edge: ti.template(), x: ti.template(), v: ti.template(), grid: ti.template(),
+                        v0: vec3, omega: vec3, c: vec3):
     """DOPs, mean velocities and velocity spreads of every real edge; the largest edge length [m] and
-    edge speed |v_e| + spread [m/s] (atomic max: deterministic)."""
+    edge speed |v_e| + spread [m/s] (atomic max: deterministic).  The velocities are taken relative to the
+    rigid field v0 + omega x (x - c) (zero: the world's; ``ContactConfig.rigid_reach``): a rigid motion does
+    not change the distance of two points (d/dt |p_a - p_b| gets nothing from omega x (p_a - p_b), which is
+    normal to p_a - p_b), so the reach of ``find_candidates`` holds for the relative velocities as well."""
     grid.max_edge_length[None] = 0.0
     grid.max_speed[None] = 0.0
     for i in x:
@@ -159,8 +217,10 @@ def compute_edge_bounds(edge: ti.template(), x: ti.template(), v: ti.template(),
             grid.edge_dop_center[i] = x[i] + half
             grid.edge_dop_extent[i] = dop_extent(half)
             ti.atomic_max(grid.max_edge_length[None], 2.0 * half.norm())
-            ve = 0.5 * (v[i] + v[i + 1])
-            spread = 0.5 * (v[i + 1] - v[i]).norm()
+            va = v[i] - v0 - omega.cross(x[i] - c)
+            vb = v[i + 1] - v0 - omega.cross(x[i + 1] - c)
+            ve = 0.5 * (va + vb)
+            spread = 0.5 * (vb - va).norm()
             grid.edge_velocity[i] = ve
             grid.edge_velocity_spread[i] = spread
             ti.atomic_max(grid.max_speed[None], ve.norm() + spread)

@@ -72,6 +72,8 @@ class ContactPipeline:
         #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
         self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
         self.strand_boxes = StrandBoxFields(model.strand_count)
+        #: (v0, omega, c) of the rigid field the last detection measured hair-hair reaches in (``rigid_reach``).
+        self.reach_frame = (np.zeros(3), np.zeros(3), np.zeros(3))
         #: Whether the last step skipped the hair-hair search (no strands within reach), and how many did.
         self.hair_search_skipped = False
         self.hair_search_skip_count = 0
@@ -125,11 +127,18 @@ class ContactPipeline:
         import numpy as np
 
         from ..fields import ContactFields
-        from .grid import compute_edge_bounds, find_candidates, proximity_boxes
+        from .grid import (compute_edge_bounds, find_candidates, proximity_boxes, rigid_velocity_fit,
+                           strand_velocity_moments)
 
         m, cfg, g = self.model, self.config, self.grid
         x, v = state.vertex_position, state.vertex_velocity
-        compute_edge_bounds(m.edge, x, v, g)
+        fit = (np.zeros(3), np.zeros(3), np.zeros(3))
+        if dynamic and cfg.rigid_reach and cfg.hair_hair:
+            # Hair-hair reaches from velocities relative to the hair's best-fit rigid motion (grid module).
+            strand_velocity_moments(m.strand, x, v, self.strand_boxes.strand_velocity_moments)
+            fit = rigid_velocity_fit(self.strand_boxes.strand_velocity_moments.to_numpy())
+        self.reach_frame = fit
+        compute_edge_bounds(m.edge, x, v, g, *(ti.Vector([float(c) for c in a]) for a in fit))
         max_edge = float(g.max_edge_length[None])
         speed = float(g.max_speed[None])
         # Reach of the step (dynamic mode): two edges may approach by their relative displacement,
