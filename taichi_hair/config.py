@@ -182,7 +182,12 @@ class ContactConfig:
             hair's best-fit rigid motion (v0 + omega x (x - c), least squares over every vertex) instead of
             the world's: a rigid motion changes no distance, so the bound holds as well, and the edges'
             detection boxes no longer grow with the motion the whole groom shares (a turning head, the
-            spinning hairball).  Off: the world velocities (the paper's).
+            spinning hairball).  Off (default): the world velocities, as the paper.  Not a speed-up where
+            it was measured (2026-12-04, A/B in one session, BENCHMARKS.md): ``head_turn.toml`` detection
+            12.5 -> 11 ms per step, the same frame time; ``hairball --strands 1000 --frames 16`` detection
+            256 -> 288 ms per step (the reach's cap at one edge scales every edge's velocity term down by the
+            fastest edge's speed, and the fastest relative speed is lower, so the cap bites less), strain max
+            0.045 -> 0.033 %, hair-pair max 206 -> 174 um.  Opt-in.
         max_contacts_per_edge: keep only the closest contacts of each edge
             (6 in the paper) [-].
         projection_iterations: Gauss-Seidel sweeps over the 8 batches per
@@ -326,7 +331,7 @@ class ContactConfig:
     skip_when_apart: bool = True
     skip_slow_continuous: bool = True
     late_body_contacts: bool = True
-    rigid_reach: bool = True
+    rigid_reach: bool = False
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):

@@ -202,11 +202,12 @@ def test_detection_with_relative_velocities_matches_brute_force():
     v = rng.normal(scale=0.05, size=x.shape) + np.cross([0.0, 40.0, 0.0], x - x.mean(0))
     st.vertex_velocity.from_numpy(v.astype(np.float32))
     dt, K = 2e-3, 6
-    cfg = ContactConfig(margin=2e-4, max_contacts_per_edge=K)
+    cfg = ContactConfig(margin=2e-4, max_contacts_per_edge=K, rigid_reach=True)
     pipe = ContactPipeline(model, cfg)
     pipe.colliders.begin_step(model.control())
     found = _detected_pairs(pipe, st, dt)
     v0, w, c = pipe.reach_frame
+    assert np.linalg.norm(w) > 30   # the fit took the rotation out
     vr = st.vertex_velocity.to_numpy().astype(np.float64)
     vr = vr - v0 - np.cross(w, x - c)
     edges = [i for i in range(model.vertex_count) if model.host["edge_rest_length"][i] > 0]
