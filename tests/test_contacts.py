@@ -161,27 +161,25 @@ def test_a_rigid_motion_of_the_whole_groom_adds_no_hair_hair_reach():
 
     model, _ = _random_groom(7)
     st = model.state()
-    n = model.vertex_count
-    rest, rest_entries = {}, {}
-    for rigid in (True, False):
-        pipe = ContactPipeline(model, ContactConfig(margin=2e-4, rigid_reach=rigid))
-        pipe.colliders.begin_step(model.control())
-        rest[rigid] = _detected_pairs(pipe, st, 1e-2)
-        rest_entries[rigid] = int(pipe.boxes.edge_entry_start[n])
+
+    def detect_both():
+        pairs, entries, omega = {}, {}, None
+        for rigid in (True, False):
+            pipe = ContactPipeline(model, ContactConfig(margin=2e-4, rigid_reach=rigid))
+            pipe.colliders.begin_step(model.control())
+            pairs[rigid] = _detected_pairs(pipe, st, 1e-2)
+            entries[rigid] = int(pipe.boxes.edge_entry_start[model.vertex_count])
+            omega = pipe.reach_frame[1] if rigid else omega
+        return pairs, entries, omega
+
+    rest, rest_entries, _ = detect_both()
     assert rest[True] == rest[False] and rest_entries[True] == rest_entries[False]  # at rest they agree
     x = st.positions().astype(np.float64)
     omega = np.array([100.0, -200.0, 200.0])
     v = np.array([1.0, 1.5, -0.9]) + np.cross(omega, x - x.mean(0) + 0.003)
     st.vertex_velocity.from_numpy(v.astype(np.float32))
-    found, entries = {}, {}
-    for rigid in (True, False):
-        pipe = ContactPipeline(model, ContactConfig(margin=2e-4, rigid_reach=rigid))
-        pipe.colliders.begin_step(model.control())
-        found[rigid] = _detected_pairs(pipe, st, 1e-2)
-        entries[rigid] = int(pipe.boxes.edge_entry_start[n])
-        if rigid:
-            v0, w, _ = pipe.reach_frame
-            assert np.allclose(w, omega, rtol=1e-4), w   # the fit recovers the motion (f32 sums)
+    found, entries, w = detect_both()
+    assert np.allclose(w, omega, rtol=1e-4), w   # the fit recovers the motion (f32 sums)
     assert found[True] == rest[True] and entries[True] == rest_entries[True]
     assert entries[False] > entries[True] and found[False] != rest[True], (entries, len(found[False]))
 
