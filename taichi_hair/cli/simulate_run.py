@@ -142,6 +142,8 @@ class SimulateRun:
                 self.contact_states[1:self.start + 1] = -1
             self.stats_rows = [r for r in ckpt["stats"] if r["frame"] <= self.start]
         self.completed = self.start
+        # The checkpoint restores the solver's step count; the stage timers only hold this process's steps.
+        self.steps_before = getattr(self.solver, "step_count", 0)
 
     def _allocate_frame_buffers(self, dtype) -> None:
         """The positions of every frame, (F + 1, N, 3), and the contact states, (F + 1, N) int8: 0 free,
@@ -378,7 +380,8 @@ class SimulateRun:
         if args.profile and not hasattr(solver, "stage_seconds"):
             print(f"note: --profile: solver {scene.solver!r} has no stage timers", file=sys.stderr)
         elif args.profile:
-            steps = max(solver.step_count, 1)
+            steps = max(solver.step_count - self.steps_before, 1)
+            summary["stage_steps"] = steps  # the steps this process ran (a --resume: not those before)
             summary["stage_ms_per_step"] = {k: 1e3 * v / steps for k, v in solver.stage_seconds.items() if v > 0}
             if not args.quiet:
                 print("stage breakdown (ms per step): " + ", ".join(
