@@ -186,7 +186,7 @@ def rigid_velocity_fit(moments: np.ndarray):
     n, p, sr, sv, sc = a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13]
     sm = a[:, 13:22].reshape(-1, 3, 3)
     total = n.sum()
-    if total <= 0 or not np.any(sv) and not np.any(sc):
+    if total <= 0 or (not np.any(sv) and not np.any(sc)):
         return np.zeros(3), np.zeros(3), np.zeros(3)
     c = (n[:, None] * p + sr).sum(0) / total
     v0 = sv.sum(0) / total
