@@ -339,7 +339,7 @@ class BoxGridFields:
 class StrandBoxFields:
     """Strand-level broad phase (``grid.strands_apart``): per-strand boxes, shape (strand_count,)."""
 
-    def __init__(self, strand_count: int):
+    def __init__(self, strand_count: int, velocity_moments: bool = False):
         s = max(1, strand_count)
         #: Union of the strand's edge detection boxes: lower and upper corners [m] (+/-1e30 if no real edge).
         self.strand_box_lo = ti.field(vec3, s)
@@ -347,8 +347,9 @@ class StrandBoxFields:
         #: 1 where no two non-adjacent edges of the strand can be within reach of each other [-].
         self.strand_self_clear = ti.field(ti.i32, s)
         #: Per-strand sums for the hair's rigid velocity fit (``grid.strand_velocity_moments``): n [-], first
-        #: vertex [m], sum r [m], sum v [m/s], sum r x v [m^2/s], sum r r^T [m^2], shape (strand_count, 22).
-        self.strand_velocity_moments = ti.field(float, (s, 22))
+        #: vertex [m], sum r [m], sum v [m/s], sum r x v [m^2/s], sum r r^T [m^2], shape (strand_count, 22);
+        #: None unless asked for (``ContactConfig.rigid_reach``).
+        self.strand_velocity_moments = ti.field(float, (s, 22)) if velocity_moments else None
 
 
 class GridFields:

@@ -87,8 +87,9 @@ def test_coulomb_local_solve_satisfies_the_law_on_random_inputs():
 
 
 # --------------------------------------------------------------------------- detection
-def _brute_force_contacts(x, strand_of, edges, radius, margin, K):
-    """All pairs within reach, then the paper's rule: keep a pair if it is among the K closest of either edge."""
+def _brute_force_contacts(x, strand_of, edges, reach, K):
+    """All pairs closer than ``reach(a, b)``, then the paper's rule: keep a pair if it is among the K closest of
+    either edge."""
     from itertools import combinations
 
     near = {a: [] for a in edges}
@@ -96,7 +97,7 @@ def _brute_force_contacts(x, strand_of, edges, radius, margin, K):
         if strand_of[a] == strand_of[b] and abs(a - b) <= 1:
             continue
         d = segment_distance(x[a], x[a + 1], x[b], x[b + 1])
-        if d < 2 * radius + margin:
+        if d < reach(a, b):
             near[a].append((d, b))
             near[b].append((d, a))
     top = {a: {b for _, b in sorted(v)[:K]} for a, v in near.items()}
@@ -104,17 +105,20 @@ def _brute_force_contacts(x, strand_of, edges, radius, margin, K):
     return {(min(a, b), max(a, b)) for a in edges for b in top[a]}, crowded
 
 
-def test_detection_matches_brute_force_on_random_edges():
-    """Random short strands in a small box: the hash grid + DOP + top-K finds exactly the brute-force set."""
-    rng = np.random.default_rng(7)
+def _random_groom(seed, strands=80, edge=2e-3, box=0.012):
+    rng = np.random.default_rng(seed)
     b = GroomBuilder()
     mat = RodMaterial(radius=6e-4)
-    for s in range(80):
-        p0 = rng.uniform(0, 0.012, 3)
+    for s in range(strands):
+        p0 = rng.uniform(0, box, 3)
         d = rng.normal(size=(4, 3))
-        pts = p0 + np.cumsum(2e-3 * d / np.linalg.norm(d, axis=1, keepdims=True), axis=0)
-        b.add_strand(pts, mat, root="free")
-    model = b.finalize()
+        b.add_strand(p0 + np.cumsum(edge * d / np.linalg.norm(d, axis=1, keepdims=True), axis=0), mat, root="free")
+    return b.finalize(), mat
+
+
+def test_detection_matches_brute_force_on_random_edges():
+    """Random short strands in a small box: the hash grid + DOP + top-K finds exactly the brute-force set."""
+    model, mat = _random_groom(7)
     st = model.state()
     cfg = ContactConfig(margin=2e-4, max_contacts_per_edge=6)
     from taichi_hair.contact.pipeline import ContactPipeline
@@ -127,20 +131,10 @@ def test_detection_matches_brute_force_on_random_edges():
     assert len(found) == total  # emitted once each
     x = st.positions().astype(np.float64)
     edges = [i for i in range(model.vertex_count) if model.host["edge_rest_length"][i] > 0]
-    expected, crowded = _brute_force_contacts(x, model.host["vertex_strand"], edges, mat.radius, cfg.margin, 6)
+    expected, crowded = _brute_force_contacts(x, model.host["vertex_strand"], edges,
+                                              lambda a, b: 2 * mat.radius + cfg.margin, 6)
     assert found == expected
     assert total > 100 and crowded > 10  # the 6-closest rule was exercised
-
-
-def _random_groom(seed, strands=80, edge=2e-3, box=0.012):
-    rng = np.random.default_rng(seed)
-    b = GroomBuilder()
-    mat = RodMaterial(radius=6e-4)
-    for s in range(strands):
-        p0 = rng.uniform(0, box, 3)
-        d = rng.normal(size=(4, 3))
-        b.add_strand(p0 + np.cumsum(edge * d / np.linalg.norm(d, axis=1, keepdims=True), axis=0), mat, root="free")
-    return b.finalize(), mat
 
 
 def _detected_pairs(pipe, st, dt):
@@ -189,8 +183,6 @@ def test_detection_with_relative_velocities_matches_brute_force():
     the brute-force set of pairs whose distance is below r_a + r_b + margin + sweep (|v'_a - v'_b| + s'_a +
     s'_b) + fall, v' the velocities less the fitted rigid field (``pipe.reach_frame``), the edges' means and
     half-differences, sweep = dt, fall = |g| dt^2: the boxes grown by |v'_e| + s'_e miss no such pair."""
-    from itertools import combinations
-
     from taichi_hair.contact.pipeline import ContactPipeline
 
     model, mat = _random_groom(11)
@@ -215,17 +207,12 @@ def test_detection_with_relative_velocities_matches_brute_force():
     speed = max(np.linalg.norm(mean[a]) + spread[a] for a in edges)
     longest = max(np.linalg.norm(x[a + 1] - x[a]) for a in edges)
     assert 2 * dt * speed + 9.81 * dt * dt < 0.9 * longest   # the reach's cap at one edge is not reached
-    near = {a: [] for a in edges}
-    for a, b in combinations(edges, 2):
-        if strand_of[a] == strand_of[b] and abs(a - b) <= 1:
-            continue
-        reach = (2 * mat.radius + cfg.margin + dt * (np.linalg.norm(mean[a] - mean[b]) + spread[a] + spread[b])
-                 + 9.81 * dt * dt)
-        d = segment_distance(x[a], x[a + 1], x[b], x[b + 1])
-        if d < reach:
-            near[a].append((d, b))
-            near[b].append((d, a))
-    expected = {(min(a, b), max(a, b)) for a in edges for _, b in sorted(near[a])[:K]}
+
+    def reach(a, b):
+        return (2 * mat.radius + cfg.margin + dt * (np.linalg.norm(mean[a] - mean[b]) + spread[a] + spread[b])
+                + 9.81 * dt * dt)
+
+    expected, _ = _brute_force_contacts(x, strand_of, edges, reach, K)
     assert found == expected
     assert len(found) > 100
 

@@ -20,6 +20,8 @@ from .narrow import SPLIT_NONE, build_adjacency, count_contacts, relinearize_con
 _FINAL_EDGE_PASSES = 8
 #: Plain sweeps after each (re)start of the correction before the Chebyshev acceleration begins (Wang 2015's S).
 _CHEBYSHEV_DELAY = 3
+#: (v0, omega, c) of the world frame: hair-hair reaches from the plain velocities (``ContactConfig.rigid_reach`` off).
+_WORLD_FRAME = (np.zeros(3), np.zeros(3), np.zeros(3))
 
 
 # --------------------------------------------------------------------------- host orchestration
@@ -71,9 +73,9 @@ class ContactPipeline:
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
         #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
         self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
-        self.strand_boxes = StrandBoxFields(model.strand_count)
+        self.strand_boxes = StrandBoxFields(model.strand_count, velocity_moments=config.rigid_reach)
         #: (v0, omega, c) of the rigid field the last detection measured hair-hair reaches in (``rigid_reach``).
-        self.reach_frame = (np.zeros(3), np.zeros(3), np.zeros(3))
+        self.reach_frame = _WORLD_FRAME
         #: Whether the last step skipped the hair-hair search (no strands within reach), and how many did.
         self.hair_search_skipped = False
         self.hair_search_skip_count = 0
@@ -132,7 +134,7 @@ class ContactPipeline:
 
         m, cfg, g = self.model, self.config, self.grid
         x, v = state.vertex_position, state.vertex_velocity
-        fit = (np.zeros(3), np.zeros(3), np.zeros(3))
+        fit = _WORLD_FRAME
         if dynamic and cfg.rigid_reach and cfg.hair_hair:
             # Hair-hair reaches from velocities relative to the hair's best-fit rigid motion (grid module).
             strand_velocity_moments(m.strand, x, v, self.strand_boxes.strand_velocity_moments)
