@@ -114,6 +114,28 @@ def test_styles_differ_in_curvature(head):
     assert k["straight"] < k["wavy"] < k["curly"], k
 
 
+def test_strands_leave_the_scalp_at_root_angle_and_none_stands_up_at_the_crown(head):
+    # Claim: the first edge leaves at root_angle (30 deg) above the tangent plane at its root, give or take the
+    # turn toward gravity over that edge (2 deg here), and no strand climbs more than 1 cm above its root.  With
+    # root_angle = 90 (along the normal) the crown's strands grow up where gravity has no sideways pull: 5+ cm.
+    def rise(cfg):
+        from taichi_hair.groom.generators import sample_roots
+
+        g = generate_groom(head, cfg)
+        _, n = sample_roots(head, cfg.strands, np.random.default_rng(cfg.seed))  # the same draws as the generator
+        p = g.points.reshape(cfg.strands, -1, 3)
+        e = p[:, 1] - p[:, 0]
+        angle = np.degrees(np.arcsin(np.sum(e * n, axis=1) / np.linalg.norm(e, axis=1)))
+        return angle, (p[:, :, 1] - p[:, :1, 1]).max(axis=1)
+
+    angle, climb = rise(GeneratorConfig(style="straight", strands=300, vertices_per_strand=24, length=0.18, seed=1))
+    assert np.all(angle < 30.0 + 2.0) and np.median(angle) > 20.0, (angle.min(), np.median(angle), angle.max())
+    assert climb.max() < 0.01, climb.max()
+    _, climb90 = rise(GeneratorConfig(style="straight", strands=300, vertices_per_strand=24, length=0.18, seed=1,
+                                      root_angle=90.0))
+    assert climb90.max() > 0.05, climb90.max()
+
+
 def test_deterministic_by_seed(head):
     cfg = GeneratorConfig(style="curly", strands=40, vertices_per_strand=12, seed=7)
     a, b = generate_groom(head, cfg), generate_groom(head, cfg)
@@ -166,6 +188,11 @@ def test_bad_configs_and_meshes_are_clear_errors(tmp_path):
         GeneratorConfig(length_spread=1.5)
     with pytest.raises(ValueError, match="GeneratorConfig.vertices_per_strand"):
         GeneratorConfig(vertices_per_strand=2)
+    for angle in (0.0, 91.0, float("nan")):
+        with pytest.raises(ValueError, match="GeneratorConfig.root_angle"):
+            GeneratorConfig(root_angle=angle)
+    with pytest.raises(ValueError, match="GeneratorConfig.back"):
+        GeneratorConfig(back=(0.0, float("inf"), 0.0))
     bad = tmp_path / "bad.obj"
     bad.write_text("v 0 0 0\nv 1 0 0\nf 1 2 x\n")
     with pytest.raises(ValueError, match=r"bad.obj: line 3"):

@@ -11,7 +11,10 @@ How a strand is made (all NumPy, vectorised over strands, deterministic by seed)
    sampling).  The root is lifted ``root_lift`` along the interpolated vertex
    normal, so it starts outside the surface.
 2. Centreline: grown in ``4 * (vertices_per_strand - 1)`` small steps from the
-   root, leaving along the normal; the direction turns toward gravity
+   root, leaving at ``root_angle`` above the scalp's tangent plane, leaning
+   toward the comb direction unit(t(down) + 0.2 t(back)) (t: the part in the
+   tangent plane; ``back`` decides the crown, where gravity has no tangential
+   part); ``root_angle = 90`` leaves along the normal.  The direction turns toward gravity
    (``down``) with curvature ``gravity_bend`` [1/m], and after each step a
    point closer than ``clearance`` to the surface is pushed out along the
    signed-distance gradient (so hair combs over the head instead of entering it).
@@ -260,6 +263,12 @@ class GeneratorConfig:
         curl_pitch: curly: helix pitch (length along the centreline per turn) [m].
         style_spread: per-strand random factor on the wave amplitude / curl radius, in [0, 1) [-].
         style_ramp: the wave or curl fades in over this arc length from the root [m].
+        root_angle: angle of a strand's first direction above the scalp's tangent plane [deg], in (0, 90].
+            Hair leaves a real scalp at a slant; 90 (along the normal) makes the crown's strands grow
+            straight up, where gravity cannot turn them, and a 15-20 cm strand standing up is longer than
+            hair's self-weight buckling length (~10 cm): no rest pose holds it (issue 14).
+        back: the direction strands lean toward besides ``down`` (the comb direction is
+            unit(t(down) + 0.2 t(back)), t the tangential part at the root); it decides the crown [-].
     """
 
     style: str = "straight"
@@ -281,6 +290,8 @@ class GeneratorConfig:
     curl_pitch: float = 0.02
     style_spread: float = 0.3
     style_ramp: float = 0.015
+    root_angle: float = 30.0
+    back: tuple = (0.0, 0.0, -1.0)
 
     def __post_init__(self):
         if self.style not in STYLES:
@@ -312,6 +323,12 @@ class GeneratorConfig:
         if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-12:
             raise ValueError(f"GeneratorConfig.down must be a non-zero finite 3-vector, got {self.down!r}")
         self.down = tuple(float(x) for x in d / np.linalg.norm(d))
+        if not (_finite(self.root_angle) and 0.0 < self.root_angle <= 90.0):
+            raise ValueError(f"GeneratorConfig.root_angle must lie in (0, 90] degrees, got {self.root_angle!r}")
+        b = np.asarray(self.back, np.float64).reshape(-1)
+        if b.shape != (3,) or not np.all(np.isfinite(b)):
+            raise ValueError(f"GeneratorConfig.back must be a finite 3-vector, got {self.back!r}")
+        self.back = tuple(float(x) for x in b)
 
 
 def _finite(v) -> bool:
@@ -392,6 +409,14 @@ def generate_groom(surface: ScalpSurface, config: GeneratorConfig | None = None)
     x = np.empty((steps + 1, count, 3))
     x[0] = roots + cfg.root_lift * normals
     d = normals.copy()
+    if cfg.root_angle < 90.0:
+        def tangential(v):
+            return v - np.sum(v * normals, axis=1, keepdims=True) * normals
+
+        comb = _unit(tangential(down) + 0.2 * tangential(np.asarray(cfg.back)))
+        a = math.radians(cfg.root_angle)
+        # Where neither has a tangential part (comb ~ 0), leave along the normal.
+        d = _unit(math.cos(a) * comb + math.sin(a) * normals)
     for k in range(steps):
         nxt = _push_out(surface, x[k] + h[:, None] * d, cfg.clearance)
         seg = nxt - x[k]

@@ -1,0 +1,49 @@
+"""Sag-free grooms hold their authored shape under gravity with hair-hair and body contacts (issue 14, item 3).
+
+Run as a user would: ``taichi-hair simulate`` on the head-turn scene with the head still, a generated straight
+groom, once as authored and once with ``--rest-pose sag-free``.  The drift is measured here from the written
+frames (independent of the run's own summary): the distance of every non-root vertex from its position at
+frame 0, after 2 s.
+"""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+
+
+def _drift_p90(out) -> float:
+    with np.load(os.path.join(out, "frames.npz")) as z:
+        pos, starts = z["positions"].astype(np.float64), z["strand_vertex_start"]
+    free = np.ones(pos.shape[1], bool)
+    free[starts] = False
+    return float(np.percentile(np.linalg.norm(pos[-1] - pos[0], axis=1)[free], 90))
+
+
+def test_a_generated_groom_solved_sag_free_holds_within_1_mm_with_contacts_while_the_authored_one_sags(tmp_path):
+    # Claim (issue 14 item 3, at a test's size: 60 strands x 16 vertices instead of 300 x 24): after 2 s (48
+    # frames, 4 substeps, 10 ADMM iterations, hair-hair friction 0.2, head mesh friction 0.3, head still), the
+    # p90 vertex drift of the sag-free groom is <= 1 mm and <= 10 % of the authored groom's.  Measured at this
+    # size: 0.033 mm against 15.1 mm.  The 4 strands the solve reports as not held fall, and stay under p90.
+    from bench_rest_pose import scene_text
+
+    text = scene_text("straight", "still").replace("strands = 300", "strands = 60")
+    text = text.replace("vertices_per_strand = 24", "vertices_per_strand = 16")
+    scene = tmp_path / "head_still.toml"
+    scene.write_text(text)
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    drift = {}
+    for rest_pose in ("authored", "sag-free"):
+        out = tmp_path / rest_pose
+        proc = subprocess.run([sys.executable, "-m", "taichi_hair.cli", "simulate", str(scene), "--rest-pose",
+                               rest_pose, "--frames", "48", "--out", str(out), "--quiet"], capture_output=True,
+                              text=True, timeout=600, env=env, cwd=ROOT)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        drift[rest_pose] = _drift_p90(out)
+    assert drift["authored"] > 5e-3, drift  # the authored groom does sag (the claim below is not vacuous)
+    assert drift["sag-free"] <= 1e-3, drift
+    assert drift["sag-free"] <= 0.1 * drift["authored"], drift
