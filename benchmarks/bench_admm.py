@@ -5,7 +5,9 @@
    clamped hair under gravity, dynamic mode, 10 iterations per step), and a
    per-stage split (local, global, twist, frames) from a separate profiled
    run (profiling synchronises after each stage, so its total is a little
-   higher than the unprofiled figure).
+   higher than the unprofiled figure).  In the same run, the Thomas bound: one Thomas solve with 3
+   right-hand sides over the same groom, strands in parallel (the cost floor of one iteration's global
+   step), and the ADMM's throughput as a share of it (issue 15, item 1 aims at >= 1/5).
 2. One 10 cm hair rod of 40 edges clamped horizontally (Gamma = 6.8): wall
    time of the quasistatic ADMM to bring the tip height within 0.1 % of its
    final value, side by side with MuJoCo's cable (benchmarks/mujoco_cable.py)
@@ -43,6 +45,65 @@ def curly_groom(ti_hair, strands, vertices, seed=0):
     return b.finalize()
 
 
+def thomas_bound(ti, model, repeats=200):
+    """The cost floor of one ADMM iteration's global step (issue 15, item 1): one Thomas solve with 3 right-hand
+    sides over the groom's strands, strands in parallel, the matrix and right-hand side read from fields and the
+    solution written to another (the same memory traffic as the solver's in-place solve), in one kernel launch
+    per solve.  Returns M vertices solved per second (median of ``repeats`` launches, 5 untimed first)."""
+    n = model.vertex_count
+    f = dict(lower=ti.field(ti.f32, n), diag=ti.field(ti.f32, n), upper=ti.field(ti.f32, n), cp=ti.field(ti.f32, n),
+             rhs=ti.Vector.field(3, ti.f32, n), x=ti.Vector.field(3, ti.f32, n))
+    rng = np.random.default_rng(0)
+    f["lower"].from_numpy(np.full(n, -1.0, np.float32))
+    f["upper"].from_numpy(np.full(n, -1.0, np.float32))
+    f["diag"].from_numpy(np.full(n, 4.0, np.float32))
+    f["rhs"].from_numpy(rng.standard_normal((n, 3)).astype(np.float32))
+    _thomas_bound_kernel(model.strand_vertex_start, model.strand_vertex_count, f["lower"], f["diag"], f["upper"],
+                         f["cp"], f["rhs"], f["x"])
+    ts = []
+    for k in range(repeats + 5):
+        ti.sync()
+        t = time.perf_counter()
+        _thomas_bound_kernel(model.strand_vertex_start, model.strand_vertex_count, f["lower"], f["diag"], f["upper"],
+                             f["cp"], f["rhs"], f["x"])
+        ti.sync()
+        if k >= 5:
+            ts.append(time.perf_counter() - t)
+    return n / float(np.median(ts)) / 1e6
+
+
+def _thomas_bound_kernel_source():
+    import taichi as ti
+
+    @ti.kernel
+    def kernel(start: ti.template(), count: ti.template(), lower: ti.template(), diag: ti.template(),
+               upper: ti.template(), cp: ti.template(), rhs: ti.template(), x: ti.template()):
+        for s in start:
+            a, m = start[s], count[s]
+            inv = 1.0 / diag[a]
+            cp[a] = upper[a] * inv
+            x[a] = rhs[a] * inv
+            for k in range(1, m):
+                i = a + k
+                inv_k = 1.0 / (diag[i] - lower[i] * cp[i - 1])
+                cp[i] = upper[i] * inv_k
+                x[i] = (rhs[i] - lower[i] * x[i - 1]) * inv_k
+            for kk in range(1, m):
+                i = a + m - 1 - kk
+                x[i] = x[i] - cp[i] * x[i + 1]
+
+    return kernel
+
+
+_thomas_bound_cache = []
+
+
+def _thomas_bound_kernel(*args):
+    if not _thomas_bound_cache:
+        _thomas_bound_cache.append(_thomas_bound_kernel_source())
+    _thomas_bound_cache[0](*args)
+
+
 def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="auto", anderson=None):
     model = curly_groom(th, strands, vertices)
     res = {"strands": strands, "vertices_per_strand": vertices, "vertices": model.vertex_count}
@@ -69,6 +130,9 @@ def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="aut
         else:
             res["ms_per_iteration"] = 1e3 * el / its
             res["mvertex_iterations_per_s"] = model.vertex_count * its / el / 1e6
+    # The Thomas bound in the same run (after the ADMM timings), and the ADMM's share of it (aim: >= 1/5).
+    res["thomas_bound_mvertices_per_s"] = thomas_bound(ti, model)
+    res["fraction_of_thomas_bound"] = res["mvertex_iterations_per_s"] / res["thomas_bound_mvertices_per_s"]
     return res
 
 
@@ -185,7 +249,8 @@ def main(argv=None):
     out = {"date": time.strftime("%Y-%m-%d"), "arch": arch, "throughput": []}
     print(f"SolverADMM benchmark on {arch} ({os.cpu_count()} cores), taichi {ti.__version__}")
     windows = [None] if args.anderson is None else [int(w) for w in args.anderson.split(",")]
-    print(f"{'strands x verts':>16} {'anderson':>8} {'ms/iter':>9} {'Mvert-it/s':>11} {'compile s':>10}  stage ms/iter")
+    print(f"{'strands x verts':>16} {'anderson':>8} {'ms/iter':>9} {'Mvert-it/s':>11} {'Thomas Mv/s':>11} "
+          f"{'share':>6} {'compile s':>10}  stage ms/iter")
     for size in ([] if args.rod_only else args.sizes.split(",")):
         ns, nv = (int(v) for v in size.split("x"))
         for w in windows:
@@ -193,6 +258,7 @@ def main(argv=None):
             out["throughput"].append(r)
             stages = " ".join(f"{k}={v:.2f}" for k, v in r["stage_ms_per_iteration"].items())
             print(f"{size:>16} {r['anderson_window']:8d} {r['ms_per_iteration']:9.3f} {r['mvertex_iterations_per_s']:11.2f} "
+                  f"{r['thomas_bound_mvertices_per_s']:11.1f} {r['fraction_of_thomas_bound']:6.3f} "
                   f"{r['compile_and_first_step_s']:10.2f}  {stages}", flush=True)
     out["rod_to_rest_by_window"] = []
     for w in ([] if args.no_rod else windows):
