@@ -605,6 +605,28 @@ def test_contact_next_to_clamped_vertices_is_not_amplified():
     assert moved < 2e-3, moved
 
 
+def test_two_clamped_root_edges_that_overlap_get_no_contact_and_the_correction_stops_at_its_sweeps():
+    """Two clamped strands whose root edges (vertices 0 and 1 fixed) cross 40 um apart, less than their radii's
+    sum (100 um); the free parts are centimetres apart.  Nothing can separate the root edges, so they form no
+    contact, the correction stops after its configured sweeps instead of sweeping to its cap every step, and
+    (gravity off) nothing moves (below 1 um)."""
+    mat = RodMaterial(radius=5e-5)
+    b = GroomBuilder()
+    b.add_strand(line((0, 0, 0), (0, 0.04, 0), 5), mat)                        # A along +y, root edge to y = 1 cm
+    b.add_strand(line((-0.005, 0.005, 4e-5), (0.035, 0.005, 4e-5), 5), mat)    # B along +x, crosses A's root edge
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    ctl.gravity = (0.0, 0.0, 0.0)
+    x0 = st.positions().astype(np.float64)
+    cc = ContactConfig(friction=0.2)
+    solver = SolverADMM(model, SolverADMMConfig(iterations=10, contacts=cc))
+    for _ in range(3):
+        solver.step(st, ctl, 1 / 96)
+        assert solver.contact_stats["contacts"] == 0, solver.contact_stats
+        assert solver.contacts.correction_sweeps_last <= cc.correction_iterations, solver.contacts.correction_sweeps_last
+    assert np.abs(st.positions().astype(np.float64) - x0).max() < 1e-6
+
+
 @pytest.mark.parametrize("lengths", ["rest", "before", "free", "rest_along_strands"])
 def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(lengths):
     """Rod B lies across rod A, 20 um above contact at x^t, and ends the ADMM iterations 1 mm below A's
