@@ -46,62 +46,30 @@ def curly_groom(ti_hair, strands, vertices, seed=0):
 
 
 def thomas_bound(ti, model, repeats=200):
-    """The cost floor of one ADMM iteration's global step (issue 15, item 1): one Thomas solve with 3 right-hand
-    sides over the groom's strands, strands in parallel, the matrix and right-hand side read from fields and the
-    solution written to another (the same memory traffic as the solver's in-place solve), in one kernel launch
-    per solve.  Returns M vertices solved per second (median of ``repeats`` launches, 5 untimed first)."""
+    """The cost floor of one ADMM iteration's global step (issue 15, item 1): the solver's own Thomas kernel
+    (``tridiag.thomas_solve``, strands in parallel) with 3 right-hand sides over the groom, one launch per
+    solve.  Thomas works in place, so the matrix and right-hand side are restored before each launch
+    (untimed).  Returns M vertices solved per second (median of ``repeats`` launches, 5 untimed first)."""
+    from taichi_hair.tridiag import thomas_solve
+
     n = model.vertex_count
-    f = dict(lower=ti.field(ti.f32, n), diag=ti.field(ti.f32, n), upper=ti.field(ti.f32, n), cp=ti.field(ti.f32, n),
-             rhs=ti.Vector.field(3, ti.f32, n), x=ti.Vector.field(3, ti.f32, n))
+    lower, diag, upper = (ti.field(ti.f32, n) for _ in range(3))
+    rhs = ti.Vector.field(3, ti.f32, n)
     rng = np.random.default_rng(0)
-    f["lower"].from_numpy(np.full(n, -1.0, np.float32))
-    f["upper"].from_numpy(np.full(n, -1.0, np.float32))
-    f["diag"].from_numpy(np.full(n, 4.0, np.float32))
-    f["rhs"].from_numpy(rng.standard_normal((n, 3)).astype(np.float32))
-    _thomas_bound_kernel(model.strand_vertex_start, model.strand_vertex_count, f["lower"], f["diag"], f["upper"],
-                         f["cp"], f["rhs"], f["x"])
+    b0 = rng.standard_normal((n, 3)).astype(np.float32)
+    lower.from_numpy(np.full(n, -1.0, np.float32))
+    diag.from_numpy(np.full(n, 4.0, np.float32))
     ts = []
     for k in range(repeats + 5):
+        upper.from_numpy(np.full(n, -1.0, np.float32))
+        rhs.from_numpy(b0)
         ti.sync()
         t = time.perf_counter()
-        _thomas_bound_kernel(model.strand_vertex_start, model.strand_vertex_count, f["lower"], f["diag"], f["upper"],
-                             f["cp"], f["rhs"], f["x"])
+        thomas_solve(model.strand_vertex_start, model.strand_vertex_count, lower, diag, upper, rhs)
         ti.sync()
         if k >= 5:
             ts.append(time.perf_counter() - t)
     return n / float(np.median(ts)) / 1e6
-
-
-def _thomas_bound_kernel_source():
-    import taichi as ti
-
-    @ti.kernel
-    def kernel(start: ti.template(), count: ti.template(), lower: ti.template(), diag: ti.template(),
-               upper: ti.template(), cp: ti.template(), rhs: ti.template(), x: ti.template()):
-        for s in start:
-            a, m = start[s], count[s]
-            inv = 1.0 / diag[a]
-            cp[a] = upper[a] * inv
-            x[a] = rhs[a] * inv
-            for k in range(1, m):
-                i = a + k
-                inv_k = 1.0 / (diag[i] - lower[i] * cp[i - 1])
-                cp[i] = upper[i] * inv_k
-                x[i] = (rhs[i] - lower[i] * x[i - 1]) * inv_k
-            for kk in range(1, m):
-                i = a + m - 1 - kk
-                x[i] = x[i] - cp[i] * x[i + 1]
-
-    return kernel
-
-
-_thomas_bound_cache = []
-
-
-def _thomas_bound_kernel(*args):
-    if not _thomas_bound_cache:
-        _thomas_bound_cache.append(_thomas_bound_kernel_source())
-    _thomas_bound_cache[0](*args)
 
 
 def throughput(th, ti, strands, vertices, iterations=10, steps=10, schedule="auto", anderson=None):
