@@ -504,3 +504,50 @@ def strands_apart(box_lo: np.ndarray, box_hi: np.ndarray, self_clear: np.ndarray
     b = a + 1 + (np.arange(total) - start)
     overlap = np.all((lo[a][:, others] <= hi[b][:, others]) & (lo[b][:, others] <= hi[a][:, others]), axis=1)
     return not bool(overlap.any())
+
+
+def _segment_distances(p1, q1, p2, q2) -> np.ndarray:
+    """Distances between segments p1-q1 and p2-q2 of positive length, row by row (Ericson 2005, 5.1.9)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e = np.einsum("ij,ij->i", d1, d1), np.einsum("ij,ij->i", d2, d2)
+    b, c, f = np.einsum("ij,ij->i", d1, d2), np.einsum("ij,ij->i", d1, r), np.einsum("ij,ij->i", d2, r)
+    den = a * e - b * b
+    s = np.where(den > 1e-12 * a * e, np.clip((b * f - c * e) / np.where(den > 0, den, 1.0), 0.0, 1.0), 0.0)
+    t = (b * s + f) / e
+    s = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), s))
+    t = np.clip(t, 0.0, 1.0)
+    return np.linalg.norm(p1 + s[:, None] * d1 - p2 - t[:, None] * d2, axis=1)
+
+
+def warn_overlapping_root_edges(model) -> None:
+    """A warning when kinematic edges of two strands on one body (clamped root edges: vertices 0 and 1 fixed)
+    overlap, closer than their radii's sum: nothing can move them apart, so they get no hair-hair contact
+    (``grid.pair_may_collide``) and stay overlapped; the run's hair-pair figures do not see them."""
+    h = model.host
+    fixed = np.asarray(h["vertex_is_fixed"]) != 0
+    strand = np.asarray(h["vertex_strand"])
+    e = np.nonzero(fixed[:-1] & fixed[1:] & (strand[:-1] == strand[1:]))[0]  # kinematic edges
+    if e.size < 2:
+        return
+    from scipy.spatial import cKDTree
+
+    x = np.asarray(h["vertex_body_position"], np.float64)  # body frame: fixed while the bodies move
+    p, q = x[e], x[e + 1]
+    se = strand[e]
+    radius = np.asarray(h["strand_radius"], np.float64)[se]
+    body = np.asarray(h["strand_body"])[se]
+    reach = float(np.max(np.linalg.norm(q - p, axis=1))) + 2.0 * float(radius.max())
+    pairs = cKDTree(0.5 * (p + q)).query_pairs(reach, output_type="ndarray")
+    pairs = pairs[(se[pairs[:, 0]] != se[pairs[:, 1]]) & (body[pairs[:, 0]] == body[pairs[:, 1]])]
+    if pairs.size == 0:
+        return
+    i, j = pairs[:, 0], pairs[:, 1]
+    depth = radius[i] + radius[j] - _segment_distances(p[i], q[i], p[j], q[j])
+    over = np.nonzero(depth > 0.0)[0]
+    if over.size:
+        import warnings
+
+        k = over[np.argmax(depth[over])]
+        warnings.warn(f"{over.size} pair{'s' if over.size > 1 else ''} of clamped root edges overlap (deepest: strands "
+                      f"{se[i[k]]} and {se[j[k]]}, {1e6 * depth[k]:.0f} um into each other): nothing can move them "
+                      "apart, so they get no hair-hair contact and stay so", stacklevel=4)

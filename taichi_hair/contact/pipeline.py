@@ -45,6 +45,10 @@ class ContactPipeline:
         self.config = config
         self.colliders = colliders if colliders is not None else ColliderSet([], model.body_count)
         _warn_soft_rest_lengths(model, config)
+        if config.hair_hair:
+            from .grid import warn_overlapping_root_edges
+
+            warn_overlapping_root_edges(model)
         n = model.vertex_count
         #: Contact radius of each vertex/edge (its strand's radius) [m], shape (vertex_count,).
         self.vertex_radius = ti.field(float, n)
