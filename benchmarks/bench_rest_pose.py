@@ -1,11 +1,12 @@
 """Sag-free rest pose (issue 14): how well each groom holds its authored shape, authored vs sag-free.
 
-    python3 benchmarks/bench_rest_pose.py [--frames 48] [--strands 300] [--grooms straight,wavy,curly,ponytail]
+    python3 benchmarks/bench_rest_pose.py [--frames N] [--strands 300] [--grooms straight,wavy,curly,ponytail]
         [--motion still|head_turn] [--contacts all|body] [--out benchmarks/results/rest_pose.json]
 
 For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
 ``assets/scenes/ponytail.toml``) with its body still (``--motion still``) or turning, hair-hair and body contacts
-on at the scene's settings, simulated ``--frames`` frames (48 = 2 s) twice through ``taichi-hair simulate``:
+on at the scene's settings, simulated ``--frames`` frames (default 48 = 2 s with the body still; 240 = 10 s under the head turn,
+whose 2 s cycle starts at 0.25 s, so the groom has 7.75 s to settle) twice through ``taichi-hair simulate``:
 with ``--rest-pose authored`` and ``--rest-pose sag-free``.  Printed and written: the time of the rest
 pose solve, the strands it holds, and the p90 / max vertex drift from the authored shape at the end and over the
 run (the runs' own ``summary.json``: ``quality.drift_*``), the strain and the wall time of each run.
@@ -99,7 +100,7 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--frames", type=int, default=48)
+    ap.add_argument("--frames", type=int, default=None, help="frames to simulate (default: 48 still, 240 head_turn)")
     ap.add_argument("--strands", type=int, default=300)
     ap.add_argument("--grooms", default="straight,wavy,curly,ponytail")
     ap.add_argument("--motion", choices=("still", "head_turn"), default="still")
@@ -107,6 +108,8 @@ def main(argv=None) -> int:
                     help="all: the scene's hair-hair and body contacts; body: hair-hair contacts off")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
     args = ap.parse_args(argv)
+    if args.frames is None:
+        args.frames = 240 if args.motion == "head_turn" else 48
     bench = Bench("rest_pose", argv)
     rows = {}
     with tempfile.TemporaryDirectory() as work:
