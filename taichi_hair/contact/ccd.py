@@ -41,8 +41,8 @@ proximity detection; body colliders keep the velocity-grown proximity reach
 
 import taichi as ti
 
-from .grid import (bucket_of, cell_in_range, contact_normal, entry_pair_here, exclusive_scan, pair_may_collide,
-                   row_holds, segment_closest_points)
+from .grid import (bucket_of, cell_in_range, contact_normal, entry_pair_here, edges_adjacent,
+                   edges_kinematic, exclusive_scan, row_holds, segment_closest_points)
 
 ivec4 = ti.types.vector(4, ti.i32)
 vec4 = ti.types.vector(4, float)
@@ -175,7 +175,7 @@ def find_impacts(vertex: ti.template(), edge: ti.template(), x0: ti.template(), 
                 for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
                     if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
                         b = boxes.entry_edge[e]
-                        if b != a and pair_may_collide(vertex, a, b, sa) and not is_contact_pair(con, a, b):
+                        if b != a and not edges_adjacent(vertex, a, b, sa) and not is_contact_pair(con, a, b):
                             # Evaluate in a fixed order so both edges of a pair get the same time.
                             p = ti.min(a, b)
                             q = ti.max(a, b)
@@ -185,7 +185,7 @@ def find_impacts(vertex: ti.template(), edge: ti.template(), x0: ti.template(), 
                                                          radius[a] + radius[b])
                             if capped:
                                 ti.atomic_add(ccd.capped_queries[None], 1)
-                            if toi <= 1.0:
+                            if toi <= 1.0 and not edges_kinematic(vertex, a, b):
                                 count = _insert_impact(ccd, a, b, toi, count, K)
         ccd.edge_impact_count[a] = count
 

@@ -368,16 +368,19 @@ def entry_pair_here(boxes: ti.template(), e: ti.i32, lo_a, box_lo_a, box_hi_a, c
 
 
 @ti.func
-def pair_may_collide(vertex: ti.template(), a: ti.i32, b: ti.i32, strand_a: ti.i32) -> bool:
-    """Edges a and b (a != b) may form a hair-hair contact: not neighbours on one strand (they share a vertex),
-    and not both kinematic (all four vertices fixed, e.g. two clamped root edges: they move with their bodies,
-    nothing can separate them, and a contact between them could never be resolved; the correction would then
-    sweep to its cap every step: a wavy groom on the head whose two root edges overlapped at x* by 45 um ran
-    175 ms of correction per step instead of 22 ms)."""
-    neighbours = vertex.vertex_strand[b] == strand_a and ti.abs(b - a) <= 1
-    kinematic = vertex.vertex_is_fixed[a] != 0 and vertex.vertex_is_fixed[a + 1] != 0 and \
+def edges_adjacent(vertex: ti.template(), a: ti.i32, b: ti.i32, strand_a: ti.i32) -> bool:
+    """Edges a and b of one strand share a vertex (no contact between them)."""
+    return vertex.vertex_strand[b] == strand_a and ti.abs(b - a) <= 1
+
+
+@ti.func
+def edges_kinematic(vertex: ti.template(), a: ti.i32, b: ti.i32) -> bool:
+    """All four vertices of edges a and b are fixed (e.g. two clamped root edges): they move with their bodies,
+    nothing can separate them, so they get no contact (one could never be resolved: the correction would sweep
+    to its cap every step; a wavy groom on the head whose two root edges overlapped at x* by 45 um ran 175 ms
+    of correction per step instead of 22 ms).  Tested only for pairs within reach (four reads, rare path)."""
+    return vertex.vertex_is_fixed[a] != 0 and vertex.vertex_is_fixed[a + 1] != 0 and \
         vertex.vertex_is_fixed[b] != 0 and vertex.vertex_is_fixed[b + 1] != 0
-    return not neighbours and not kinematic
 
 
 @ti.kernel
@@ -392,8 +395,8 @@ def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template()
     falls): a bound on how much closer they can get during the step, from
     their *relative* motion (hair moving together needs little margin).
 
-    Edges of the same strand that share a vertex, and pairs of kinematic edges, are skipped
-    (:func:`pair_may_collide`).
+    Edges of the same strand that share a vertex, and pairs of kinematic edges (:func:`edges_kinematic`),
+    are skipped.
     """
     t = boxes.table_size
     K = ti.static(grid.candidates_per_edge)
@@ -416,12 +419,12 @@ def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template()
                 for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
                     if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
                         b = boxes.entry_edge[e]
-                        if b != a and pair_may_collide(vertex, a, b, sa):
+                        if b != a and not edges_adjacent(vertex, a, b, sa):
                             rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
                             reach = ra + radius[b] + margin + sweep * rel + fall
                             if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
                                 s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-                                if dist < reach:
+                                if dist < reach and not edges_kinematic(vertex, a, b):
                                     count = _insert_candidate(grid, a, b, dist, count, K)
         grid.edge_candidate_count[a] = count
 
@@ -522,7 +525,7 @@ def _segment_distances(p1, q1, p2, q2) -> np.ndarray:
 def warn_overlapping_root_edges(model) -> None:
     """A warning when kinematic edges of two strands on one body (clamped root edges: vertices 0 and 1 fixed)
     overlap, closer than their radii's sum: nothing can move them apart, so they get no hair-hair contact
-    (``grid.pair_may_collide``) and stay overlapped; the run's hair-pair figures do not see them."""
+    (:func:`edges_kinematic`) and stay overlapped; the run's hair-pair figures do not see them."""
     h = model.host
     fixed = np.asarray(h["vertex_is_fixed"]) != 0
     strand = np.asarray(h["vertex_strand"])
