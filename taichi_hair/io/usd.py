@@ -117,7 +117,10 @@ def _extract_in_child(path, budget: int, size: int):
         out = os.path.join(d, "arrays.npz")
         cmd = [sys.executable, _usd_extract.__file__, os.path.abspath(os.fspath(path)), out, str(budget)]
         try:
-            proc = subprocess.run(cmd, capture_output=True, timeout=timeout)
+            # One USD work thread and two malloc arenas: a small read gains nothing from threads,
+            # and each extra thread's arena reserves 64 MB of the address-space budget.
+            env = dict(os.environ, PXR_WORK_THREAD_LIMIT="1", MALLOC_ARENA_MAX="2")
+            proc = subprocess.run(cmd, capture_output=True, timeout=timeout, env=env)
         except subprocess.TimeoutExpired:
             raise GroomFormatError(path, f"usd-core did not finish reading the file within {timeout:.0f} s") \
                 from None
@@ -132,8 +135,10 @@ def _extract_in_child(path, budget: int, size: int):
                 name = signal.Signals(-proc.returncode).name
             except ValueError:
                 name = f"signal {-proc.returncode}"
-            raise GroomFormatError(path, f"usd-core crashed ({name}) while reading the file, in a child process; "
-                                         f"the file is corrupt or not a USD stage")
+            said = [ln.strip() for ln in err.splitlines() if ln.strip() and not ln.startswith("#")]
+            said = f" (it said: {said[-1][:200]})" if said else ""
+            raise GroomFormatError(path, f"usd-core crashed ({name}) while reading the file, in a child process"
+                                         f"{said}; the file is corrupt or not a USD stage")
         if proc.returncode != 0:
             why = mine[-1] if mine else (err.strip().splitlines() or ["no message"])[-1][:300]
             raise GroomFormatError(path, why)
