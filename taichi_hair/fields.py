@@ -260,6 +260,9 @@ class ContactFields:
         self.contact_kinematic = ti.field(vec3, c)
         #: Coulomb friction coefficient mu_c [-], shape (capacity,).
         self.contact_friction = ti.field(float, c)
+        #: Contact thickness: the gap is measured past it.  r_a + r_b for a hair pair (less for a pair already
+        #: closer at rest, ``ContactConfig.keep_rest_overlaps``), r for a body contact [m], shape (capacity,).
+        self.contact_thickness = ti.field(float, c)
         #: Mass-split Delassus diagonal D_hat_c = sum_i n_i h_{c,i}^2 / W_z,i [m/N], shape (capacity,).
         self.contact_delassus = ti.field(float, c)
         #: Accumulated correction r_tilde_c = D_hat_c r_c (Sec. 4.5, footnote 3) [m], shape (capacity,).

@@ -19,7 +19,8 @@ Each figure is independent of the solver that made the frame (admm, shape, xpbd 
   most the SDF's, which over a hole measures to the winding number's cap (w = 1/2), not to a triangle;
 - vertices inside a body: free vertices deeper than ``INSIDE_TOLERANCE_M`` in any body [-];
 - hair-hair: the ADMM solver's ``contact_stats`` keys ``hair_penetration_p99_m``,
-  ``hair_penetration_max_m`` and ``crossed_pairs`` when it provides them;
+  ``hair_penetration_max_m``, ``crossed_pairs`` and ``rest_overlap_contacts`` (pairs closer at rest than two
+  radii, held at that distance: ``ContactConfig.keep_rest_overlaps``) when it provides them;
 - rest: the largest vertex speed of the frame [m/s]; a dynamic run "came to rest" when it is below
   ``REST_SPEED_M_S`` in its last frame;
 - shape drift: the distance of each free vertex of a clamped strand from its authored position carried by
@@ -39,7 +40,7 @@ STRAIN_WARNING = 0.05
 #: A dynamic run came to rest when no vertex moves faster than this in its last frame [m/s].
 REST_SPEED_M_S = 1e-2
 #: Hair-hair figures read from ``SolverADMM.contact_stats`` when present.
-HAIR_KEYS = ("hair_penetration_p99_m", "hair_penetration_max_m", "crossed_pairs")
+HAIR_KEYS = ("hair_penetration_p99_m", "hair_penetration_max_m", "crossed_pairs", "rest_overlap_contacts")
 
 
 def edge_strain(positions, edge_rest_length) -> np.ndarray:

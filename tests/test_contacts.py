@@ -629,6 +629,46 @@ def test_two_clamped_root_edges_that_overlap_get_no_contact_and_the_correction_s
     assert np.abs(st.positions().astype(np.float64) - x0).max() < 1e-6
 
 
+@pytest.mark.parametrize("keep", [True, False])
+def test_a_pair_authored_closer_than_two_radii_keeps_its_rest_distance_and_does_not_pass_through(keep):
+    """Rod B lies across clamped rod A, its axis 40 um above A's at rest: closer than r_a + r_b = 100 um.
+    With ``keep_rest_overlaps`` the pair's contact thickness is its rest distance, 40 um: gravity off, nothing
+    moves (< 1 um); pressed onto A by 50 m/s^2 B rests 40 um above A's axis (within 0.2 r = 10 um), it neither
+    sinks nor passes through.  Without it (the paper's r_a + r_b) the first steps push B out to 100 um."""
+    mat = RodMaterial(radius=5e-5)
+    b = GroomBuilder()
+    b.add_strand(line((0, 0, 0), (0.01, 0, 0), 9), mat)                            # A: clamped along +x
+    b.add_strand(line((0.005, 4e-5, -0.004), (0.005, 4e-5, 0.004), 9), mat, root="free")  # B across, 40 um up
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    ctl.gravity = (0.0, 0.0, 0.0)
+    x0 = st.positions().astype(np.float64)
+    solver = _solver(model, iterations=20, friction=0.5, keep_rest_overlaps=keep)
+
+    def separation():
+        x = st.positions().astype(np.float64)
+        # The closest of A's two edges under B (vertices 3-5) and B's two edges over A (vertices 12-14).
+        return min(segment_distance(x[i], x[i + 1], x[j], x[j + 1]) for i in (3, 4) for j in (12, 13))
+
+    solver.step(st, ctl, 1 / 480)
+    assert solver.contact_stats["contacts"] > 0
+    if keep:
+        for _ in range(5):
+            solver.step(st, ctl, 1 / 480)
+        assert np.abs(st.positions().astype(np.float64) - x0).max() < 1e-6
+        assert solver.contact_stats["rest_overlap_contacts"] > 0
+    else:  # pushed out in the first step (and B flies off with the push's velocity)
+        assert separation() > 2 * mat.radius - 0.2 * mat.radius, separation()
+    ctl.gravity = (0.0, -50.0, 0.0)
+    for _ in range(40):
+        solver.step(st, ctl, 1 / 480)
+    x = st.positions().astype(np.float64)
+    k = int(np.argmin(np.abs(x[9:, 2]))) + 9      # B's vertex over A
+    assert x[k, 1] > x[4, 1], (x[k], x[4])      # still above A: not passed through
+    expected = 4e-5 if keep else 2 * mat.radius
+    assert abs(separation() - expected) < 0.2 * mat.radius, (separation(), expected)
+
+
 @pytest.mark.parametrize("lengths", ["rest", "before", "free", "rest_along_strands"])
 def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(lengths):
     """Rod B lies across rod A, 20 um above contact at x^t, and ends the ADMM iterations 1 mm below A's

@@ -43,6 +43,7 @@ import taichi as ti
 
 from .grid import (bucket_of, cell_in_range, contact_normal, entry_pair_here, edges_adjacent,
                    edges_kinematic, exclusive_scan, row_holds, segment_closest_points)
+from .narrow import pair_thickness
 
 ivec4 = ti.types.vector(4, ti.i32)
 vec4 = ti.types.vector(4, float)
@@ -211,8 +212,9 @@ def count_impact_contacts(ccd: ti.template(), con: ti.template()):
 
 
 @ti.kernel
-def write_impact_contacts(x0: ti.template(), x1: ti.template(), radius: ti.template(), ccd: ti.template(),
-                          con: ti.template(), first: ti.i32, friction: float):
+def write_impact_contacts(vertex: ti.template(), x0: ti.template(), x1: ti.template(), radius: ti.template(),
+                          ccd: ti.template(), con: ti.template(), first: ti.i32, friction: float,
+                          keep_rest_overlaps: ti.template()):
     """Append the impact contacts at index ``first`` on (up to capacity); contact_count gets the exact total."""
     n = ccd.edge_impact_count.shape[0]
     con.contact_count[None] = first + ccd.edge_emit_count[n]
@@ -237,7 +239,9 @@ def write_impact_contacts(x0: ti.template(), x1: ti.template(), radius: ti.templ
                     con.contact_vertex[c] = ivec4(a, a + 1, b, b + 1)
                     con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - u), -u)
                     con.contact_normal[c] = nrm
-                    con.contact_kinematic[c] = -(radius[a] + radius[b]) * nrm - d0t
+                    r = pair_thickness(vertex, radius, a, b, keep_rest_overlaps)
+                    con.contact_thickness[c] = r
+                    con.contact_kinematic[c] = -r * nrm - d0t
                     con.contact_friction[c] = friction
                     con.contact_collider[c] = -1
                 c += 1

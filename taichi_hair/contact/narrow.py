@@ -112,7 +112,7 @@ def count_contacts(vertex: ti.template(), x: ti.template(), v: ti.template(), ra
 @ti.kernel
 def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(), v: ti.template(),
                    radius: ti.template(), grid: ti.template(), cs: ti.template(), con: ti.template(),
-                   hair_friction: float, margin: float, sweep: float, fall: float):
+                   hair_friction: float, margin: float, sweep: float, fall: float, keep_rest_overlaps: ti.template()):
     """Fill the contact arrays (up to capacity); contact_count gets the exact total."""
     n = x.shape[0]
     n_hair = grid.edge_emit_count[n]
@@ -128,7 +128,8 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
                     pa = x[a] + s * (x[a + 1] - x[a])
                     pb = x[b] + t * (x[b + 1] - x[b])
                     nrm = contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
-                    r = radius[a] + radius[b]
+                    r = pair_thickness(vertex, radius, a, b, keep_rest_overlaps)
+                    con.contact_thickness[c] = r
                     con.contact_vertex[c] = ivec4(a, a + 1, b, b + 1)
                     con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
                     con.contact_normal[c] = nrm
@@ -150,9 +151,25 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
                         con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
                         con.contact_normal[cb] = n_end
                         con.contact_kinematic[cb] = -s_end - radius[a] * n_end
+                        con.contact_thickness[cb] = radius[a]
                         con.contact_friction[cb] = cs.collider_friction[k]
                         con.contact_collider[cb] = k
                     cb += 1
+
+
+@ti.func
+def pair_thickness(vertex: ti.template(), radius: ti.template(), a: ti.i32, b: ti.i32,
+                   keep_rest_overlaps: ti.template()) -> float:
+    """Contact thickness of edges a and b: r_a + r_b, or, with ``keep_rest_overlaps``, their distance at rest
+    (x*, ``vertex_rest_position``) where that is less: a groom's strands authored closer than two radii (a
+    ponytail's tail, a guide standing for a wisp) keep that separation instead of being pushed apart from
+    the first step, so the authored shape stays an equilibrium with contacts on."""
+    r = radius[a] + radius[b]
+    if ti.static(keep_rest_overlaps):
+        xr = ti.static(vertex.vertex_rest_position)
+        s, t, d = segment_closest_points(xr[a], xr[a + 1], xr[b], xr[b + 1])
+        r = ti.min(r, d)
+    return r
 
 
 @ti.func
@@ -216,6 +233,7 @@ def write_late_body_contacts(vertex: ti.template(), x: ti.template(), radius: ti
                     con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
                     con.contact_normal[cb] = n_end
                     con.contact_kinematic[cb] = -s_end - radius[a] * n_end
+                    con.contact_thickness[cb] = radius[a]
                     con.contact_friction[cb] = 0.0
                     con.contact_collider[cb] = k
                 cb += 1
@@ -291,7 +309,7 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
             d0 = (x0[a] + s * (x0[a + 1] - x0[a])) - (x0[b] + t * (x0[b + 1] - x0[b]))
             con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
             con.contact_normal[c] = nrm
-            con.contact_kinematic[c] = -(radius[a] + radius[b]) * nrm - (d0 - d0.dot(nrm) * nrm)
+            con.contact_kinematic[c] = -con.contact_thickness[c] * nrm - (d0 - d0.dot(nrm) * nrm)
             if ti.static(frictionless_hair):
                 con.contact_friction[c] = 0.0
         else:

@@ -185,7 +185,7 @@ class ContactPipeline:
         while True:
             count_contacts(m.vertex, x, v, self.vertex_radius, g, self.colliders, margin, sweep, fall)
             write_contacts(m.vertex, m.strand, x, v, self.vertex_radius, g, self.colliders, self.con, cfg.friction, margin,
-                           sweep, fall)
+                           sweep, fall, cfg.keep_rest_overlaps)
             total = int(self.con.contact_count[None])
             if total <= self.con.capacity:
                 break
@@ -233,7 +233,8 @@ class ContactPipeline:
         count_impact_contacts(ccd, self.con)
         first = min(int(self.con.contact_count[None]), self.con.capacity)
         while True:
-            write_impact_contacts(x0, x, self.vertex_radius, ccd, self.con, first, cfg.friction)
+            write_impact_contacts(m.vertex, x0, x, self.vertex_radius, ccd, self.con, first, cfg.friction,
+                                  cfg.keep_rest_overlaps)
             total = int(self.con.contact_count[None])
             if total <= self.con.capacity:
                 break
@@ -496,6 +497,8 @@ class ContactPipeline:
         ``crossed_pairs`` are over the hair-hair contacts of the step (pairs within reach at its beginning),
         a crossed pair counting as more than r_a + r_b deep (``projection.contact_statistics``);
         ``body_penetration_max_m`` is against the solver's collider distance (a mesh's voxel SDF).
+        A hair pair is measured past its contact thickness: r_a + r_b, or its rest distance where the pair
+        was closer at rest (``ContactConfig.keep_rest_overlaps``); ``rest_overlap_contacts`` counts those.
         """
         import numpy as np
 
@@ -506,11 +509,17 @@ class ContactPipeline:
         o = self.stats_out.to_numpy()
         nc = self.contact_count
         p99 = 0.0
+        kept = 0
         if self.config.hair_hair and nc > 0:
             pen = con.contact_penetration.to_numpy()[:nc]
             hair = con.contact_collider.to_numpy()[:nc] < 0
             if hair.any():
                 p99 = float(np.percentile(pen[hair], 99))
+                if self.config.keep_rest_overlaps:
+                    vtx = con.contact_vertex.to_numpy()[:nc][hair]
+                    rad = self.vertex_radius.to_numpy()
+                    full = rad[vtx[:, 0]] + rad[vtx[:, 2]]
+                    kept = int(np.count_nonzero(con.contact_thickness.to_numpy()[:nc][hair] < full * (1 - 1e-6)))
         return {"contacts": nc, "sticking": int(o[0]), "sliding": int(o[1]),
                 "separating": int(o[2]), "max_penetration_m": max(float(o[3]), float(o[4]), 0.0),
                 "body_penetration_max_m": max(float(o[3]), 0.0), "hair_penetration_max_m": max(float(o[4]), 0.0),
@@ -518,7 +527,7 @@ class ContactPipeline:
                 "correction_sweeps": self.correction_sweeps_last,
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
                 "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped,
-                "late_body_contacts": self.late_body_contacts}
+                "late_body_contacts": self.late_body_contacts, "rest_overlap_contacts": kept}
 
 
 #: The end-of-step correction's "rest" lengths take the rest length for the length: warn when a material

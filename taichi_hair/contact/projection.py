@@ -295,7 +295,7 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
             w = con.contact_weight[c]
             d = w[0] * x[vtx[0]] + w[1] * x[vtx[1]] + w[2] * x[vtx[2]] + w[3] * x[vtx[3]]
             side = con.contact_normal[c].dot(d)
-            pen = radius[vtx[0]] + radius[vtx[2]] - side
+            pen = con.contact_thickness[c] - side
             if side < 0.0:
                 ti.atomic_add(out[5], 1.0)
             ti.atomic_max(out[4], pen)
