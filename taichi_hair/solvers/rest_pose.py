@@ -42,8 +42,11 @@ Choices where the problem is silent (written down here and in the README):
   and contacts act only against a disturbance.  It is the rule with no choice left to make; its price is
   that a strand lying horizontally needs a large rest curvature: 30 cm of human hair held horizontally
   needs a rest turn of ~1.4 rad per 2.5 mm edge at the root (the strand is reported as not held), and
-  a TressFX ponytail tied 4 cm from the head (assets/ponytail, 1.9 cm edges) holds only 62 of its 255
-  strands: a real tail is carried by its neighbours (hair-hair support, not solved yet: issue 14).
+  a TressFX ponytail tied 4 cm from the head (assets/ponytail, 1.9 cm edges) holds only 60 of its 255
+  strands with 50 um hair: a real tail is carried by its neighbours.  ``ponytail.toml`` models each guide
+  as the wisp of 5 hairs TressFX draws around it (r = 110 um, a bonded wisp's bending stiffness), and then
+  all 255 are held.  Strands authored closer than two radii keep that distance in contact
+  (``ContactConfig.keep_rest_overlaps``), so the packed tail is not pushed apart either.
 * **A strand is "held"** when no rest strain moves more than ``max_rest_change`` from the authored one
   (|kappa_bar_i - kappa_i(x*)|, about 60 degrees per vertex by default), every rest turn |kappa_bar_i|
   stays below ``max_rest_turn`` (Korner's strain is 2 sin(phi/2): it cannot exceed 2), and the residual of
