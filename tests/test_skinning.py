@@ -298,3 +298,42 @@ def test_skinned_guides_match_a_full_simulation():
     sk3.deform(state3, control3)
     err3 = interpolation_error(sk3.positions(), reference, counts)
     assert err3.strand_error_rms[others].mean() < 0.6 * rms["transport", 4]
+
+
+def test_rebinding_after_an_edit_redoes_only_the_changed_strands_and_equals_a_full_binding_bit_for_bit(groom):
+    """compute_binding(previous=...) after an edit of one skinned strand and one guide: it binds again the
+    edited strand and the strands bound to the edited guide, keeps every other row, and its arrays equal a full
+    binding of the edited groom exactly (every vertex's arithmetic is its own).  A moved root falls back to the
+    full binding."""
+    from taichi_hair.groom.binding import _strands_to_rebind
+
+    strands, guides, model = groom
+    h0 = compute_binding(model, guides, strands)
+    g_edit = int(guides[2])
+    s_edit = next(s for s in range(len(strands)) if s not in set(guides.tolist()))
+    edited = [p.copy() for p in strands]
+    for s in (g_edit, s_edit):  # longer by 10 %, root kept
+        edited[s][1:] = edited[s][0] + 1.1 * (edited[s][1:] - edited[s][0])
+    guides2, model2 = build_guides(edited, RodMaterial(), SkinningConfig(guide_ratio=0.1, seed=3))
+    assert np.array_equal(guides2, guides)
+    full = compute_binding(model2, guides, edited)
+    inc = compute_binding(model2, guides, edited, previous=h0)
+    assert set(inc) == set(full)
+    for key in full:
+        assert np.array_equal(inc[key], full[key]), key
+    # Which strands were bound again: the two edited ones and those bound to the edited guide, no others.
+    counts = full["render_strand_vertex_count"]
+    redo = _strands_to_rebind(h0, full["render_vertex_rest_position"], full["guide_vertex_rest_position"], counts,
+                              full["render_strand_vertex_start"], model2.host["strand_vertex_start"].astype(np.int64),
+                              model2.host["strand_vertex_count"].astype(np.int64), full["render_strand_guides"].shape[1],
+                              "transport")
+    g_index = int(np.nonzero(guides == g_edit)[0][0])
+    expected = {g_edit, s_edit} | set(np.nonzero(np.any(full["render_strand_guides"] == g_index, axis=1))[0].tolist())
+    assert set(redo.tolist()) == expected and len(expected) < len(strands) // 2, (sorted(redo), sorted(expected))
+    assert not np.array_equal(inc["render_vertex_bind_local"], h0["render_vertex_bind_local"])  # the edit shows
+    moved = [p.copy() for p in edited]
+    moved[s_edit] = moved[s_edit] + np.array([0.0, 0.0, 1e-3])  # a root moves: the neighbours may change
+    assert _strands_to_rebind(full, np.concatenate(moved), full["guide_vertex_rest_position"], counts,
+                              full["render_strand_vertex_start"], model2.host["strand_vertex_start"].astype(np.int64),
+                              model2.host["strand_vertex_count"].astype(np.int64), full["render_strand_guides"].shape[1],
+                              "transport") is None

@@ -40,8 +40,14 @@ def _arc_fractions(points: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, 
 
 
 def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count: int = 4,
-                    frame: str = "transport", guide_rest_frames=None) -> dict:
+                    frame: str = "transport", guide_rest_frames=None, previous: dict | None = None) -> dict:
     """Bind render strands to guides (NumPy, float64).  See the module docstring.
+
+    ``previous``: the binding of the same layout before an edit (same strands, vertex counts, guides,
+    roots and ``frame="transport"``).  Only the render strands whose rest polyline changed, and those bound
+    to a guide whose rest polyline changed, are bound again; the others keep their rows.  The result is
+    equal, bit for bit, to a full binding of the same inputs (each vertex's arithmetic does not depend on
+    which others are computed with it); where the layout or a root differs, the binding is done in full.
 
     Args:
         guide_model: the guide :class:`Model` (rest positions and frames from ``host``).
@@ -58,7 +64,8 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         ``render_strand_guides`` (S, K) guide strand indices, ``render_strand_weights`` (S, K),
         ``render_vertex_bind_edge`` (V, K) guide edge (= start vertex) index,
         ``render_vertex_bind_param`` (V, K) u in [0, 1], ``render_vertex_bind_local`` (V, K, 3) [m],
-        ``render_vertex_bind_weight`` (V, K).
+        ``render_vertex_bind_weight`` (V, K), ``guide_vertex_rest_position`` (guide vertices, 3) [m] (what the
+        binding was made against, for ``previous``).
     """
     from scipy.spatial import cKDTree
 
@@ -99,6 +106,33 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     strand_of = np.repeat(np.arange(ns), counts)
     local = np.arange(nv) - starts[strand_of]
     K = min(int(neighbour_count), ng)
+    guide_of_strand = np.full(ns, -1, dtype=np.int64)
+    guide_of_strand[gidx] = np.arange(ng)
+    is_guide = guide_of_strand >= 0
+    if frame == "transport":
+        t = h["edge_rest_tangent"].astype(np.float64)
+        d1 = h["edge_rest_director"].astype(np.float64)
+        d2 = np.cross(t, d1)
+    else:
+        t, d1, d2 = (np.asarray(a, dtype=np.float64) for a in guide_rest_frames)
+    f_g, _ = _arc_fractions(X, gcount)
+    geometry = (X, gstart, gcount, f_g, t, d1, d2, guide_of_strand, is_guide)
+
+    redo = _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame)
+    if redo is not None:
+        out = dict(previous)
+        out["render_vertex_rest_position"] = P
+        out["guide_vertex_rest_position"] = X
+        if redo.size:
+            nbr = previous["render_strand_guides"]
+            cnt = counts[redo]
+            v = np.repeat(starts[redo] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+            j, u, c = _bind_vertices(P[v], counts[redo], local[v], strand_of[v], nbr, geometry)
+            for key, val in (("render_vertex_bind_edge", j), ("render_vertex_bind_param", u),
+                             ("render_vertex_bind_local", c)):
+                out[key] = previous[key].copy()
+                out[key][v] = val
+        return out
 
     # k nearest guides by root position, inverse-distance weights.
     groots = X[gstart]
@@ -111,9 +145,6 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     with np.errstate(divide="ignore"):
         w = np.where(zero.any(axis=1, keepdims=True), zero.astype(np.float64), 1.0 / np.maximum(dist, 1e-300))
     # A guide follows itself only: slot 0 is itself with weight 1.
-    guide_of_strand = np.full(ns, -1, dtype=np.int64)
-    guide_of_strand[gidx] = np.arange(ng)
-    is_guide = guide_of_strand >= 0
     gs = np.where(is_guide)[0]
     g_self = guide_of_strand[gs]
     # Move the guide itself to slot 0 (stable: the others keep their order); if it was not
@@ -125,9 +156,48 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     w[is_guide, 0] = 1.0
     w /= w.sum(axis=1, keepdims=True)
 
+    j, u, local_c = _bind_vertices(P, counts, local, strand_of, nbr, geometry)
+    return {
+        "render_strand_vertex_start": starts,
+        "render_strand_vertex_count": counts,
+        "render_vertex_rest_position": P,
+        "render_strand_guides": nbr,
+        "render_strand_weights": w,
+        "render_vertex_bind_edge": j,
+        "render_vertex_bind_param": u,
+        "render_vertex_bind_local": local_c,
+        "render_vertex_bind_weight": w[strand_of],
+        "guide_vertex_rest_position": X,
+    }
+
+
+def _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame):
+    """The render strands an edit changed, directly or through a bound guide (sorted), or None when
+    ``previous`` cannot be reused: another layout, a moved root, or ``frame="material"``."""
+    if previous is None or frame != "transport" or "guide_vertex_rest_position" not in previous:
+        return None
+    P0, X0 = previous["render_vertex_rest_position"], previous["guide_vertex_rest_position"]
+    if (P0.shape != P.shape or X0.shape != X.shape or previous["render_strand_guides"].shape[1] != K
+            or not np.array_equal(previous["render_strand_vertex_count"], counts)):
+        return None
+    if not (np.array_equal(P0[starts], P[starts]) and np.array_equal(X0[gstart], X[gstart])):
+        return None  # a root moved: the nearest guides and the weights change
+    moved_r = np.logical_or.reduceat(np.any(P0 != P, axis=1), starts)
+    moved_g = np.logical_or.reduceat(np.any(X0 != X, axis=1), gstart) if gstart.size else np.zeros(0, bool)
+    moved = moved_r | np.any(moved_g[previous["render_strand_guides"]], axis=1)
+    return np.nonzero(moved)[0]
+
+
+def _bind_vertices(P, counts, local, strand_of, nbr, geometry):
+    """Edge j, parameter u and frame coordinates of the vertices ``P`` of whole render strands (their vertex
+    counts ``counts``; ``local``, ``strand_of``: each vertex's index in its strand and its strand's index in
+    the groom), each vertex independently of the others."""
+    X, gstart, gcount, f_g, t, d1, d2, guide_of_strand, is_guide = geometry
+    ng = gstart.shape[0]
+    K = nbr.shape[1]
+    nv = P.shape[0]
     # Arc-length correspondence: segment j of guide g holding fraction s, parameter u.
     s_r, _ = _arc_fractions(P, counts)
-    f_g, _ = _arc_fractions(X, gcount)
     gstrand_of = np.repeat(np.arange(ng), gcount)
     keys = 2.0 * gstrand_of + f_g  # sorted: fractions lie in [0, 1] and strands are contiguous
     g_v = nbr[strand_of]  # (V, K)
@@ -145,13 +215,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         j[own, 0] = gstart[g_own] + jl
         u[own, 0] = np.where(local[own] == m_own - 1, 1.0, 0.0)
 
-    # Rest frames of the guide edges (columns t, d1, d2).
-    if frame == "transport":
-        t = h["edge_rest_tangent"].astype(np.float64)
-        d1 = h["edge_rest_director"].astype(np.float64)
-        d2 = np.cross(t, d1)
-    else:
-        t, d1, d2 = (np.asarray(a, dtype=np.float64) for a in guide_rest_frames)
+    # Frame coordinates in the rest frames of the guide edges (columns t, d1, d2).
     local_c = np.empty((nv, K, 3))
     for k in range(K):
         jk, uk = j[:, k], u[:, k][:, None]
@@ -162,17 +226,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         local_c[:, k, 2] = np.einsum("ij,ij->i", d, d2[jk])
     if own.any():
         local_c[own, 0] = 0.0  # exactly zero (it is, up to rounding of p - o)
-    return {
-        "render_strand_vertex_start": starts,
-        "render_strand_vertex_count": counts,
-        "render_vertex_rest_position": P,
-        "render_strand_guides": nbr,
-        "render_strand_weights": w,
-        "render_vertex_bind_edge": j,
-        "render_vertex_bind_param": u,
-        "render_vertex_bind_local": local_c,
-        "render_vertex_bind_weight": w[strand_of],
-    }
+    return j, u, local_c
 
 
 def proxy_vertices(rest_points: np.ndarray, strand_offsets: np.ndarray, guides: np.ndarray) -> np.ndarray:

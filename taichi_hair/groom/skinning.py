@@ -218,14 +218,14 @@ class SkinningLBS:
         self.fields = SkinningFields(self.render_vertex_count, self.neighbour_count, guide_model.vertex_count)
         self._upload(h)
 
-    def _binding(self, strands) -> dict:
+    def _binding(self, strands, previous: dict | None = None) -> dict:
         rest_frames = None
         if self.config.frame == "material":
             rest = self.guide_model.state()
             rest_frames = (rest.edge_tangent.to_numpy(), rest.edge_material_d1.to_numpy(),
                            rest.edge_material_d2.to_numpy())
         h = compute_binding(self.guide_model, self.guide_indices, strands, self.config.neighbour_count,
-                            self.config.frame, rest_frames)
+                            self.config.frame, rest_frames, previous)
         ns = h["render_strand_vertex_count"].shape[0]
         bodies = np.asarray(_per_strand(self._strand_body, ns, "SkinningLBS: field 'strand_body'", 0),
                             dtype=np.int64)
@@ -253,8 +253,9 @@ class SkinningLBS:
         same render vertex counts per strand, same guides.  No field is allocated, so no kernel
         is compiled again; the result equals a new :class:`SkinningLBS` of the same inputs.
         (``frame="material"`` reads the rest frames from a new rest State of the guide Model:
-        that allocates one State per call.)"""
-        h = self._binding(strands)
+        that allocates one State per call.)  With ``frame="transport"`` and no root moved, only the
+        render strands that changed, or whose guides did, are bound again (``compute_binding(previous=)``)."""
+        h = self._binding(strands, self.host)
         if not (np.array_equal(h["render_strand_vertex_count"], self.host["render_strand_vertex_count"])
                 and h["render_vertex_bind_edge"].shape == self.host["render_vertex_bind_edge"].shape):
             raise ValueError("SkinningLBS.rebind: the render strands' vertex counts (or the neighbour count) "
