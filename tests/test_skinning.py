@@ -317,7 +317,7 @@ def test_rebinding_after_an_edit_redoes_only_the_changed_strands_and_equals_a_fu
     guides2, model2 = build_guides(edited, RodMaterial(), SkinningConfig(guide_ratio=0.1, seed=3))
     assert np.array_equal(guides2, guides)
     full = compute_binding(model2, guides, edited)
-    inc = compute_binding(model2, guides, edited, previous=h0)
+    inc = compute_binding(model2, guides, edited, previous={k: v.copy() for k, v in h0.items()})
     assert set(inc) == set(full)
     for key in full:
         assert np.array_equal(inc[key], full[key]), key

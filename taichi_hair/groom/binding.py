@@ -48,6 +48,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     to a guide whose rest polyline changed, are bound again; the others keep their rows.  The result is
     equal, bit for bit, to a full binding of the same inputs (each vertex's arithmetic does not depend on
     which others are computed with it); where the layout or a root differs, the binding is done in full.
+    ``previous``'s per-vertex arrays are updated in place and returned: it no longer describes the old inputs.
 
     Args:
         guide_model: the guide :class:`Model` (rest positions and frames from ``host``).
@@ -130,7 +131,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
             j, u, c = _bind_vertices(P[v], counts[redo], local[v], strand_of[v], nbr, geometry)
             for key, val in (("render_vertex_bind_edge", j), ("render_vertex_bind_param", u),
                              ("render_vertex_bind_local", c)):
-                out[key] = previous[key].copy()
+                out[key] = previous[key]  # in place: a copy of the 1.2M-vertex arrays cost 0.3-0.4 s
                 out[key][v] = val
         return out
 

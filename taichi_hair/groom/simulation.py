@@ -172,8 +172,12 @@ class GuideSimulation:
         self.solver.refresh_model()
         if self.skin is not None:
             rest = g.rest_points.astype(np.float64)
-            off = g.strand_offsets
-            self.skin.rebind([rest[off[s]:off[s + 1]] for s in range(g.strand_count)])
+            off = np.asarray(g.strand_offsets)
+            counts = np.diff(off)
+            if counts.size and np.all(counts == counts[0]):  # one (strands, vertices, 3) array: no per-strand slices
+                self.skin.rebind(rest.reshape(counts.size, int(counts[0]), 3))
+            else:
+                self.skin.rebind([rest[off[s]:off[s + 1]] for s in range(g.strand_count)])
         self.base_fixed = host["vertex_is_fixed"].copy()
         self.base_body = host["vertex_body_position"].copy()
         self.stale = False
