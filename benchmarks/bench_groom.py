@@ -14,10 +14,13 @@ and synchronised (``ti.sync``):
 
 Also reported: the one-off costs (groom generation, session build, first frame = kernel compilation) and
 an edit: ``scale_length`` on 10 % of the strands followed by one frame, i.e. the in-place Model update.
+``--edit spread`` (default) takes every 10th strand, all over the head (about half the render strands are
+bound to an edited guide and are bound again); ``--edit region`` the 10 % whose roots are nearest one root
+(a brush stroke's selection: only the region and its border are bound again).
 
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
-        [--contacts on|off] [--size 960 720] [--out FILE]
+        [--contacts on|off] [--size 960 720] [--edit spread|region] [--out FILE]
 
 JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>_contacts_<on|off>.json`` by default; a run
 whose simulation diverges writes what it measured and the error (exit code 1).
@@ -46,6 +49,8 @@ def main(argv=None):
     p.add_argument("--schedule", default="auto", choices=["auto", "stage", "strand"],
                    help="the guides' ADMM launch schedule (GroomingConfig.schedule)")
     p.add_argument("--no-draw", action="store_true", help="skip the GGUI drawing (no Vulkan device)")
+    p.add_argument("--edit", choices=["spread", "region"], default="spread",
+                   help="which 10 %% of the strands the edit takes: every 10th, or those rooted nearest one root")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     bench = Bench("groom", argv)
@@ -143,7 +148,13 @@ def _measure(args, res, frame, session, sim, groom, ti, out, viewer, bench):
                                            for k, v in dict(sim.solver.contact_stats).items()}
 
     # An edit: grow 10 % of the strands; the next frame updates the Model in place.
-    session.select_strands(np.arange(0, groom.strand_count, 10))
+    if args.edit == "spread":
+        session.select_strands(np.arange(0, groom.strand_count, 10))
+    else:
+        roots = groom.points[groom.strand_offsets[:-1]]
+        nearest = np.argsort(np.linalg.norm(roots - roots[0], axis=1), kind="stable")
+        session.select_strands(np.sort(nearest[:groom.strand_count // 10]))
+    res["edit_selection"] = args.edit
     res["load_average_at_edit"] = list(os.getloadavg())
     with stopwatch(ti.sync) as sw:
         session.scale_length(1.1)
