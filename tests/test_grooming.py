@@ -175,28 +175,36 @@ def test_scale_length_changes_only_the_selection_and_keeps_the_curvature():
         s.scale_length(2.0)
 
 
-@pytest.mark.parametrize("factor", [0.6, 1.4])
-def test_scale_length_of_many_strands_of_mixed_vertex_counts_equals_each_strand_edited_alone(factor):
-    """scale_length_strands edits the strands of one vertex count together, as (strands, vertices, 3)
-    arrays: each strand's result is the same, bit for bit, as editing it alone (3 vertex counts, 30 strands,
-    a helix of varying pitch each)."""
-    from taichi_hair.groom.edits import scale_length_strands
+@pytest.mark.parametrize("edit,factor", [("length", 0.6), ("length", 1.4), ("curl", 0.5), ("curl", 2.0)])
+def test_length_and_curl_edits_of_many_strands_of_mixed_vertex_counts_equal_each_strand_edited_alone(edit, factor):
+    """scale_length_strands and scale_curl_strands edit the strands of one vertex count together, as
+    (strands, vertices, 3) arrays: each strand's result is the same, bit for bit, as editing it alone (3 vertex
+    counts, 30 strands, a helix of varying pitch each, one of them with a straight stretch)."""
+    from taichi_hair.groom.edits import scale_curl_strands, scale_length_strands
 
     rng = np.random.default_rng(5)
     polys = []
     for i in range(30):
         m = (8, 11, 14)[i % 3]
         t = np.linspace(0.0, 0.12 * rng.uniform(0.7, 1.0), m)
-        w = rng.uniform(40.0, 160.0)
+        w = rng.uniform(40.0, 160.0) if i != 4 else 0.0  # strand 4: straight, no turn to scale
         polys.append(np.column_stack([0.004 * np.cos(w * t), 0.004 * np.sin(w * t), t]) + rng.normal(size=3) * 0.01)
     points = np.concatenate(polys)
     current = points + rng.normal(scale=1e-3, size=points.shape)
     off = np.concatenate([[0], np.cumsum([len(p) for p in polys])])
-    together = scale_length_strands(current, points, off, np.arange(30), factor)
-    for i in range(30):
-        alone = scale_length_strands(current, points, off, [i], factor)[i]
-        assert np.array_equal(together[i][0], alone[0]) and np.array_equal(together[i][1], alone[1]), i
-        assert together[i][1].shape == polys[i].shape
+    if edit == "length":
+        together = scale_length_strands(current, points, off, np.arange(30), factor)
+        for i in range(30):
+            alone = scale_length_strands(current, points, off, [i], factor)[i]
+            assert np.array_equal(together[i][0], alone[0]) and np.array_equal(together[i][1], alone[1]), i
+            assert together[i][1].shape == polys[i].shape
+    else:
+        cur_all, rest_all = scale_curl_strands(current, points, off, np.arange(30), factor)
+        for i in range(30):
+            cur_one, rest_one = scale_curl_strands(current, points, off, [i], factor)
+            sl = slice(off[i], off[i + 1])
+            assert np.array_equal(rest_all[sl], rest_one[sl]) and np.array_equal(cur_all[sl], cur_one[sl]), i
+        assert np.array_equal(rest_all[off[4]:off[5]], points[off[4]:off[5]])  # a straight strand stays
 
 
 def test_scale_curl_scales_the_rest_curvature_of_the_selection_only():

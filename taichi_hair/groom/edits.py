@@ -60,12 +60,6 @@ def _rotation_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.column_stack([_rotate(e, axis, angle) for e in np.eye(3)])
 
 
-def _tangents(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    e = np.diff(p, axis=0)
-    le = np.linalg.norm(e, axis=1)
-    return e / le[:, None], le
-
-
 def _arc(p: np.ndarray) -> np.ndarray:
     """Cumulative arc length at every vertex of polyline p [m], shape (m,)."""
     return np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))))
@@ -101,46 +95,68 @@ def _resample(cur: np.ndarray, rest: np.ndarray, phi: np.ndarray, length: float,
     return new_cur, new_rest
 
 
+def _batch_perpendicular(t: np.ndarray) -> np.ndarray:
+    """A unit vector across each unit row of t (G, 3), as :func:`_perpendicular` row by row."""
+    a = np.where((np.abs(t[:, 2]) < 0.9)[:, None], np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]))
+    return _batch_unit(np.cross(t, a))
+
+
+def _batch_rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rodrigues rotation of the rows of v about the unit rows of ``axis`` by ``angle`` (G,) [rad]."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * np.einsum("gi,gi->g", axis, v)[:, None] * (1.0 - c)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("gi,gi->g", a, b)
+
+
 def _turning(p: np.ndarray):
-    """Bishop-frame curvature of a polyline: (angle, axis components (a.u, a.v)) per edge pair."""
-    t, le = _tangents(p)
-    u = _perpendicular(t[0])
-    angles, comps = [], []
-    for i in range(1, len(t)):
-        b = _cross(t[i - 1], t[i])
-        s, c = np.linalg.norm(b), float(np.dot(t[i - 1], t[i]))
-        v = _cross(t[i - 1], u)
-        if s < 1e-14:
-            angles.append(0.0)
-            comps.append((1.0, 0.0))
-        else:
-            a = b / s
-            angles.append(math.atan2(s, c))
-            comps.append((float(np.dot(a, u)), float(np.dot(a, v))))
-            u = _rotate(u, a, angles[-1])
-            u -= np.dot(u, t[i]) * t[i]
-            u /= np.linalg.norm(u)
-    return t, le, np.array(angles), np.array(comps)
+    """Bishop-frame curvature of G polylines (G, m, 3): tangents, edge lengths, and per edge pair the turning
+    angle and its axis's components (a.u, a.v) on the Bishop frame (u, v = t x u) carried along the strand."""
+    e = np.diff(p, axis=1)
+    le = np.linalg.norm(e, axis=2)
+    t = e / le[:, :, None]
+    G, n = t.shape[0], t.shape[1]
+    u = _batch_perpendicular(t[:, 0])
+    angles, comps = np.zeros((G, n - 1)), np.zeros((G, n - 1, 2))
+    comps[:, :, 0] = 1.0
+    for i in range(1, n):
+        b = np.cross(t[:, i - 1], t[:, i])
+        s = np.linalg.norm(b, axis=1)
+        turn = s >= 1e-14  # a straight pair keeps angle 0, components (1, 0), and the frame
+        a = b / np.where(turn, s, 1.0)[:, None]
+        ang = np.where(turn, np.arctan2(s, _dot(t[:, i - 1], t[:, i])), 0.0)
+        v = np.cross(t[:, i - 1], u)
+        angles[:, i - 1] = ang
+        comps[turn, i - 1, 0] = _dot(a, u)[turn]
+        comps[turn, i - 1, 1] = _dot(a, v)[turn]
+        un = _batch_rotate(u, a, ang)
+        un = _batch_unit(un - _dot(un, t[:, i])[:, None] * t[:, i])
+        u = np.where(turn[:, None], un, u)
+    return t, le, angles, comps
 
 
-def _scale_curl_polyline(p: np.ndarray, factor: float) -> np.ndarray:
-    """Polyline with every Bishop turning angle multiplied by ``factor`` (edge lengths and root edge kept)."""
+def _scale_curl_polylines(p: np.ndarray, factor: float) -> np.ndarray:
+    """G polylines (G, m, 3) with every Bishop turning angle multiplied by ``factor`` (edge lengths and the
+    root edge kept): the turns of :func:`_turning` applied again, scaled, from the root edge."""
     t, le, angles, comps = _turning(p)
     out = np.empty_like(p)
-    out[0], out[1] = p[0], p[1]
-    ti_, u = t[0].copy(), _perpendicular(t[0])
-    for i in range(1, len(t)):
-        v = _cross(ti_, u)
-        a = comps[i - 1][0] * u + comps[i - 1][1] * v
-        na = np.linalg.norm(a)
-        if angles[i - 1] != 0.0 and na > 0:
-            a /= na
-            ti_ = _rotate(ti_, a, factor * angles[i - 1])
-            u = _rotate(u, a, factor * angles[i - 1])
-            ti_ /= np.linalg.norm(ti_)
-            u -= np.dot(u, ti_) * ti_
-            u /= np.linalg.norm(u)
-        out[i + 1] = out[i] + le[i] * ti_
+    out[:, 0], out[:, 1] = p[:, 0], p[:, 1]
+    ti_, u = t[:, 0].copy(), _batch_perpendicular(t[:, 0])
+    for i in range(1, t.shape[1]):
+        v = np.cross(ti_, u)
+        a = comps[:, i - 1, 0:1] * u + comps[:, i - 1, 1:2] * v
+        na = np.linalg.norm(a, axis=1)
+        turn = (angles[:, i - 1] != 0.0) & (na > 0)
+        a = a / np.where(turn, na, 1.0)[:, None]
+        ang = factor * angles[:, i - 1]
+        tn = _batch_unit(_batch_rotate(ti_, a, ang))
+        un = _batch_rotate(u, a, ang)
+        un = _batch_unit(un - _dot(un, tn)[:, None] * tn)
+        ti_ = np.where(turn[:, None], tn, ti_)
+        u = np.where(turn[:, None], un, u)
+        out[:, i + 1] = out[:, i] + le[:, i, None] * ti_
     return out
 
 
@@ -308,15 +324,17 @@ def scale_curl_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.
     Returns:
         (points, rest_points), new arrays in the dtypes of the given ones.
     """
-    off = offsets
+    off = np.asarray(offsets, dtype=np.int64)
+    strands = np.asarray(strands, dtype=np.int64).reshape(-1)
     rest = rest_points.copy()
     pts = points.copy()
-    for s in strands:
-        a, b = off[s], off[s + 1]
-        q = _scale_curl_polyline(rest_points[a:b].astype(np.float64), factor)
-        q[:2] = rest_points[a:a + 2]  # the clamped root edge, bit for bit
-        rest[a:b] = q.astype(rest.dtype)
-        pts[a:b] = rest[a:b]
+    counts = off[strands + 1] - off[strands]
+    for m in np.unique(counts):  # the strands of one vertex count together, as (strands, vertices, 3) arrays
+        idx = off[strands[counts == m]][:, None] + np.arange(m)
+        q = _scale_curl_polylines(rest_points[idx].astype(np.float64), float(factor))
+        q[:, :2] = rest_points[idx[:, :2]]  # the clamped root edge, bit for bit
+        rest[idx] = q.astype(rest.dtype)
+        pts[idx] = rest[idx]
     return pts, rest
 
 
