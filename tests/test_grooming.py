@@ -175,12 +175,13 @@ def test_scale_length_changes_only_the_selection_and_keeps_the_curvature():
         s.scale_length(2.0)
 
 
-@pytest.mark.parametrize("edit,factor", [("length", 0.6), ("length", 1.4), ("curl", 0.5), ("curl", 2.0)])
-def test_length_and_curl_edits_of_many_strands_of_mixed_vertex_counts_equal_each_strand_edited_alone(edit, factor):
-    """scale_length_strands and scale_curl_strands edit the strands of one vertex count together, as
+@pytest.mark.parametrize("edit,factor", [("length", 0.6), ("length", 1.4), ("curl", 0.5), ("curl", 2.0),
+                                         ("trim", 0.0)])
+def test_length_curl_and_trim_edits_of_many_strands_of_mixed_vertex_counts_equal_each_strand_edited_alone(edit, factor):
+    """scale_length_strands, scale_curl_strands and trim_strands edit the strands of one vertex count together, as
     (strands, vertices, 3) arrays: each strand's result is the same, bit for bit, as editing it alone (3 vertex
     counts, 30 strands, a helix of varying pitch each, one of them with a straight stretch)."""
-    from taichi_hair.groom.edits import scale_curl_strands, scale_length_strands
+    from taichi_hair.groom.edits import scale_curl_strands, scale_length_strands, trim_strands
 
     rng = np.random.default_rng(5)
     polys = []
@@ -198,6 +199,18 @@ def test_length_and_curl_edits_of_many_strands_of_mixed_vertex_counts_equal_each
             alone = scale_length_strands(current, points, off, [i], factor)[i]
             assert np.array_equal(together[i][0], alone[0]) and np.array_equal(together[i][1], alone[1]), i
             assert together[i][1].shape == polys[i].shape
+    elif edit == "trim":  # the plane z = 6 cm above the lowest root cuts most strands
+        plane, normal = np.array([0.0, 0.0, points[off[:-1], 2].min() + 0.06]), np.array([0.0, 0.0, 1.0])
+        together = trim_strands(current, points, off, plane, normal, np.ones(30, bool))
+        assert len(together) > 15
+        for i in range(30):
+            one = np.zeros(30, bool)
+            one[i] = True
+            alone = trim_strands(current, points, off, plane, normal, one)
+            assert alone.keys() == ({i} & together.keys())
+            if i in together:
+                assert np.array_equal(together[i][0], alone[i][0]) and np.array_equal(together[i][1], alone[i][1])
+                assert abs((together[i][0][-1] - plane) @ normal) < 1e-12  # the tip on the plane
     else:
         cur_all, rest_all = scale_curl_strands(current, points, off, np.arange(30), factor)
         for i in range(30):

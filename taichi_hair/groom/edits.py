@@ -13,7 +13,7 @@ cast to the dtype of the arrays they replace.
 * :func:`rest_from_current`: rest pose <- current pose on chosen strands (a comb's result).
 
 Trims and growths keep every strand's vertex count: the edited strand is *resampled* along its new
-length (:func:`_resample`: vertex i at the same arc fraction as before, linear between the old
+length (:func:`_batch_resample`: vertex i at the same arc fraction as before, linear between the old
 vertices, so edges get shorter or longer by the length ratio).  The layout of the simulation then
 never changes, and the Model is updated in place instead of rebuilt.  The price: a strong growth
 coarsens the strand (curls finer than the new edge spacing are smoothed), a strong trim makes short
@@ -71,28 +71,6 @@ def _sample(knots: np.ndarray, points: np.ndarray, s: np.ndarray) -> np.ndarray:
     idx = np.clip(np.searchsorted(knots, s, side="right") - 1, 0, len(knots) - 2)
     u = np.clip((s - knots[idx]) / (knots[idx + 1] - knots[idx]), 0.0, 1.0)
     return points[idx] + u[:, None] * (points[idx + 1] - points[idx])
-
-
-def _resample(cur: np.ndarray, rest: np.ndarray, phi: np.ndarray, length: float, tip=None):
-    """Both poses of a strand resampled to ``len(phi)`` vertices along the first ``length`` [m] of
-    the rest polyline ``rest`` (the strand, extended beyond its tip for a growth).
-
-    Vertex i goes to the rest arc length phi_i * length, phi_i the old arc fraction of vertex i,
-    so the relative spacing is kept (uniform stays uniform) and every edge is scaled by
-    length / old length.  Both poses are parametrised by the *rest* arc length and interpolated
-    linearly, so vertex i of the current pose is the point that corresponds to vertex i of the rest
-    pose; new vertices lie on the old polylines (a corner between two old vertices is cut by the
-    new chord: the rest length is ``length`` minus that chord shortening, and a curl finer than
-    the new edge spacing is smoothed).  The root vertex is kept bit for bit.  ``tip`` (current,
-    rest) overrides the last vertex (a trim puts it exactly on the cutting plane).
-    """
-    c = _arc(rest)
-    s = phi * length
-    new_cur, new_rest = _sample(c, cur, s), _sample(c, rest, s)
-    new_cur[0], new_rest[0] = cur[0], rest[0]
-    if tip is not None:
-        new_cur[-1], new_rest[-1] = tip
-    return new_cur, new_rest
 
 
 def _batch_perpendicular(t: np.ndarray) -> np.ndarray:
@@ -180,7 +158,7 @@ def trim_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.ndarra
 
     A strand of ``chosen`` (bool, (strand_count,)) is cut when its current polyline crosses the
     plane, at its first crossing from the root; the part holding the root stays.  Both poses are
-    resampled along the kept part (:func:`_resample`), so the vertex count is kept, edges get
+    resampled along the kept part (:func:`_batch_resample`), so the vertex count is kept, edges get
     shorter and the last vertex lies on the plane (the same rest arc length cuts the rest pose).
     Keeping the layout lets the solver update its Model in place (milliseconds) instead of
     building a new one (a kernel recompilation).
@@ -194,17 +172,25 @@ def trim_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.ndarra
     side = np.repeat(np.sign(dist[off[:-1]]), np.diff(np.asarray(off, dtype=np.int64)))
     crosses = np.logical_or.reduceat(dist * side <= 0.0, off[:-1]) & (dist[off[:-1]] != 0.0) & chosen
     new = {}
-    for s in np.nonzero(crosses)[0]:
-        a, b = off[s], off[s + 1]
-        cur = points[a:b].astype(np.float64)
-        rest = rest_points[a:b].astype(np.float64)
-        d = dist[a:b]
-        k = int(np.nonzero(d * np.sign(d[0]) <= 0.0)[0][0])
+    cut = np.nonzero(crosses)[0]
+    counts = np.diff(np.asarray(off, dtype=np.int64))[cut]
+    for m in np.unique(counts):  # the strands of one vertex count together, as (strands, vertices, 3) arrays
+        group = cut[counts == m]
+        idx = np.asarray(off, dtype=np.int64)[group][:, None] + np.arange(m)
+        cur, rest, d = points[idx].astype(np.float64), rest_points[idx].astype(np.float64), dist[idx]
+        k = np.argmax(d * np.sign(d[:, :1]) <= 0.0, axis=1)  # the first vertex across the plane
         j = k - 1
-        u = d[j] / (d[j] - d[k])
-        tip = (cur[j] + u * (cur[j + 1] - cur[j]), rest[j] + u * (rest[j + 1] - rest[j]))
-        c = _arc(rest)
-        new[int(s)] = _resample(cur, rest, c / c[-1], c[j] + u * (c[j + 1] - c[j]), tip)
+        rows = np.arange(group.size)
+        u = d[rows, j] / (d[rows, j] - d[rows, k])
+        c = np.concatenate([np.zeros((group.size, 1)),
+                            np.cumsum(np.linalg.norm(np.diff(rest, axis=1), axis=2), axis=1)], axis=1)
+        length = c[rows, j] + u * (c[rows, j + 1] - c[rows, j])
+        new_cur, new_rest = _batch_resample(cur, rest, np.full(group.size, m), (c / c[:, -1:]) * length[:, None])
+        # The last vertex exactly on the plane (the same rest arc length cuts the rest pose).
+        new_cur[:, -1] = cur[rows, j] + u[:, None] * (cur[rows, j + 1] - cur[rows, j])
+        new_rest[:, -1] = rest[rows, j] + u[:, None] * (rest[rows, j + 1] - rest[rows, j])
+        for row, st in enumerate(group.tolist()):
+            new[st] = (new_cur[row], new_rest[row])
     return new
 
 
@@ -216,7 +202,7 @@ def scale_length_strands(points: np.ndarray, rest_points: np.ndarray, offsets: n
     continued beyond the tip with the tip's curvature and torsion (the screw motion taking the
     last-but-one edge pair to the last one, at the last rest edge length; the current pose
     continues rigidly with the tip's frame).  Either way the strand keeps its vertex count and
-    both poses are resampled along the new length (:func:`_resample`): edges scale by ``factor``,
+    both poses are resampled along the new length (:func:`_batch_resample`): edges scale by ``factor``,
     and the rest length is ``factor`` times the old one up to the chord shortening of the
     resampling.  A large growth of a curly strand therefore smooths curls finer than the new edge
     spacing; add vertices to the groom beforehand for that.
@@ -294,12 +280,26 @@ def _scale_length_group(cur: np.ndarray, rest: np.ndarray, f: float):
         ext_cur = np.concatenate([cur, cur_grown], axis=1)
         ext_rest = np.concatenate([rest, grown], axis=1)
         n_valid = m + k
-    # Resample both poses at the rest arc lengths phi_i * f * total, as :func:`_resample`.
-    knots = np.concatenate([np.zeros((G, 1)),
-                            np.cumsum(np.linalg.norm(np.diff(ext_rest, axis=1), axis=2), axis=1)], axis=1)
+    s = (c / total[:, None]) * (f * total)[:, None]  # vertex i at the rest arc length phi_i * f * total
+    return _batch_resample(ext_cur, ext_rest, n_valid, s)
+
+
+def _batch_resample(cur: np.ndarray, rest: np.ndarray, n_valid: np.ndarray, s: np.ndarray):
+    """Both poses of G strands resampled at the rest arc lengths ``s`` (G, m) along the rest polylines ``rest``
+    (G, n, 3; the strands, extended beyond their tips for a growth), of which the first ``n_valid`` (G,)
+    vertices count.
+
+    The edits put vertex i at the rest arc length phi_i * length, phi_i its old arc fraction, so the relative
+    spacing is kept (uniform stays uniform) and every edge is scaled by length / old length.  Both poses are
+    parametrised by the *rest* arc length and interpolated linearly, so vertex i of the current pose is the
+    point that corresponds to vertex i of the rest pose; new vertices lie on the old polylines (a corner
+    between two old vertices is cut by the new chord: the rest length is ``length`` minus that chord
+    shortening, and a curl finer than the new edge spacing is smoothed).  The root vertex is kept bit for bit.
+    """
+    knots = np.concatenate([np.zeros((rest.shape[0], 1)),
+                            np.cumsum(np.linalg.norm(np.diff(rest, axis=1), axis=2), axis=1)], axis=1)
     cols = np.arange(knots.shape[1])
     knots_valid = np.where(cols[None, :] < n_valid[:, None], knots, np.inf)
-    s = (c / total[:, None]) * (f * total)[:, None]
     j = np.count_nonzero(knots_valid[:, None, :] <= s[:, :, None], axis=2) - 1
     j = np.clip(j, 0, (n_valid - 2)[:, None])
     k0 = np.take_along_axis(knots, j, axis=1)
@@ -311,7 +311,7 @@ def _scale_length_group(cur: np.ndarray, rest: np.ndarray, f: float):
         p1 = np.take_along_axis(p, j[:, :, None] + 1, axis=1)
         return p0 + u * (p1 - p0)
 
-    new_cur, new_rest = sample(ext_cur), sample(ext_rest)
+    new_cur, new_rest = sample(cur), sample(rest)
     new_cur[:, 0], new_rest[:, 0] = cur[:, 0], rest[:, 0]
     return new_cur, new_rest
 
