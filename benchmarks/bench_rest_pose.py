@@ -1,7 +1,7 @@
 """Sag-free rest pose (issue 14): how well each groom holds its authored shape, authored vs sag-free.
 
     python3 benchmarks/bench_rest_pose.py [--frames N] [--strands 300] [--grooms straight,wavy,curly,ponytail]
-        [--motion still|head_turn] [--contacts all|body] [--out benchmarks/results/rest_pose.json]
+        [--motion still|head_turn] [--contacts all|body] [--iterations N] [--out benchmarks/results/rest_pose.json]
 
 For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
 ``assets/scenes/ponytail.toml``) with its body still (``--motion still``) or turning, hair-hair and body contacts
@@ -55,6 +55,9 @@ def scene_text(groom: str, motion: str) -> str:
 def run(groom: str, rest_pose: str, args, work: str) -> dict:
     path = os.path.join(work, f"{groom}_{args.motion}.toml")
     text = scene_text(groom, args.motion).replace("[groom]\n", "[groom]\nrest_pose_check = true\n", 1)
+    if args.iterations is not None:
+        assert "\niterations = 10\n" in text, "the scene's [solver] iterations line moved"
+        text = text.replace("\niterations = 10\n", f"\niterations = {args.iterations}\n", 1)
     if args.contacts == "body":
         text = without_hair_contacts(text)
     with open(path, "w") as fh:
@@ -106,6 +109,8 @@ def main(argv=None) -> int:
     ap.add_argument("--motion", choices=("still", "head_turn"), default="still")
     ap.add_argument("--contacts", choices=("all", "body"), default="all",
                     help="all: the scene's hair-hair and body contacts; body: hair-hair contacts off")
+    ap.add_argument("--iterations", type=int, default=None,
+                    help="ADMM iterations per substep instead of the scene's 10 (the head turn's return depends on it)")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
     args = ap.parse_args(argv)
     if args.frames is None:
@@ -128,7 +133,8 @@ def main(argv=None) -> int:
                   f"{b['ms_per_frame']:.0f} ms/frame; held and stable: {b.get('held_stable_strands')} strands, "
                   f"p90 drift {b.get('held_stable_drift_p90_last_mm', float('nan')):.3f} mm", flush=True)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    bench.write(args.out, dict(frames=args.frames, motion=args.motion, contacts=args.contacts, grooms=rows))
+    bench.write(args.out, dict(frames=args.frames, motion=args.motion, contacts=args.contacts,
+                               iterations=args.iterations or 10, grooms=rows))
     print(f"wrote {args.out}")
     return 0
 
