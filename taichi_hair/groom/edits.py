@@ -22,42 +22,21 @@ edges (slower ADMM convergence, Sec. 6.1).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 
 # =========================================================================== geometry helpers (NumPy, float64)
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b of two 3-vectors: the products and differences of ``np.cross`` (same bits), without its
-    per-call axis handling, which dominated the per-strand edits (measured: 60 us a call)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues rotation of v about unit ``axis`` by ``angle`` [rad]."""
-    c, s = math.cos(angle), math.sin(angle)
-    return v * c + _cross(axis, v) * s + axis * np.dot(axis, v) * (1.0 - c)
-
-
-def _perpendicular(t: np.ndarray) -> np.ndarray:
-    a = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    d = _cross(t, a)
-    return d / np.linalg.norm(d)
-
-
 def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Smallest rotation matrix taking unit a to unit b."""
-    v = _cross(a, b)
+    """Smallest rotation matrix taking unit a to unit b (a half turn about an axis across a when b = -a)."""
+    v = np.cross(a, b)
     c = float(np.dot(a, b))
     if np.linalg.norm(v) < 1e-12:
-        return np.eye(3) if c > 0 else _rotation_matrix(_perpendicular(a), math.pi)
+        if c > 0:
+            return np.eye(3)
+        p = _batch_perpendicular(a[None])[0]
+        return 2.0 * np.outer(p, p) - np.eye(3)  # the rotation by pi about p
     k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
     return np.eye(3) + k + k @ k / (1.0 + c)
-
-
-def _rotation_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
-    return np.column_stack([_rotate(e, axis, angle) for e in np.eye(3)])
 
 
 def _arc(p: np.ndarray) -> np.ndarray:
