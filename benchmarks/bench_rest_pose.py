@@ -1,7 +1,8 @@
 """Sag-free rest pose (issue 14): how well each groom holds its authored shape, authored vs sag-free.
 
     python3 benchmarks/bench_rest_pose.py [--frames N] [--strands 300] [--grooms straight,wavy,curly,ponytail]
-        [--motion still|head_turn] [--contacts all|body] [--iterations N] [--out benchmarks/results/rest_pose.json]
+        [--motion still|head_turn] [--contacts all|body] [--iterations N] [--amplitude DEG] [--air-viscosity XI]
+        [--friction MU] [--body-friction MU] [--rest-poses authored,sag-free] [--out benchmarks/results/rest_pose.json]
 
 For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
 ``assets/scenes/ponytail.toml``) with its body still (``--motion still``) or turning, hair-hair and body contacts
@@ -10,6 +11,11 @@ whose 2 s cycle starts at 0.25 s, so the groom has 7.75 s to settle) twice throu
 with ``--rest-pose authored`` and ``--rest-pose sag-free``.  Printed and written: the time of the rest
 pose solve, the strands it holds, and the p90 / max vertex drift from the authored shape at the end and over the
 run (the runs' own ``summary.json``: ``quality.drift_*``), the strain and the wall time of each run.
+
+The head-turn study (BENCHMARKS.md, issue 14) varies what the return depends on: the ADMM iterations per
+substep, the turn's amplitude, air drag (``[solver] air_viscosity``, 1e-4 Pa s in both scenes) and the hair-hair
+and body friction.
+``--rest-poses sag-free`` skips the authored runs.
 """
 
 from __future__ import annotations
@@ -58,6 +64,20 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
     if args.iterations is not None:
         assert "\niterations = 10\n" in text, "the scene's [solver] iterations line moved"
         text = text.replace("\niterations = 10\n", f"\niterations = {args.iterations}\n", 1)
+    if args.amplitude is not None:
+        assert "\namplitude = 40.0" in text, "the scene's head_turn amplitude line moved"
+        text = text.replace("\namplitude = 40.0", f"\namplitude = {float(args.amplitude)!r}", 1)
+    if args.air_viscosity is not None:
+        assert "\nair_viscosity = 1.0e-4" in text, "the scene's air_viscosity line moved"
+        text = text.replace("\nair_viscosity = 1.0e-4", f"\nair_viscosity = {float(args.air_viscosity)!r}", 1)
+    if args.friction is not None:
+        assert "[solver.contacts]" in text and "\nfriction = 0.2\n" in text, "the scene's hair-hair friction line moved"
+        text = text.replace("\nfriction = 0.2\n", f"\nfriction = {float(args.friction)!r}\n", 1)
+    if args.body_friction is not None:
+        a = text.index("[[colliders]]")
+        b = text.index("\nfriction = ", a)
+        e = text.index("\n", b + 1)
+        text = text[:b] + f"\nfriction = {float(args.body_friction)!r}" + text[e:]
     if args.contacts == "body":
         text = without_hair_contacts(text)
     with open(path, "w") as fh:
@@ -111,15 +131,33 @@ def main(argv=None) -> int:
                     help="all: the scene's hair-hair and body contacts; body: hair-hair contacts off")
     ap.add_argument("--iterations", type=int, default=None,
                     help="ADMM iterations per substep instead of the scene's 10 (the head turn's return depends on it)")
+    ap.add_argument("--amplitude", type=float, default=None, help="head_turn: peak angle [deg] instead of 40")
+    ap.add_argument("--air-viscosity", type=float, default=None,
+                    help="[solver] air_viscosity xi [Pa s] instead of the scenes' 1e-4 (0: no air)")
+    ap.add_argument("--friction", type=float, default=None, help="hair-hair friction instead of the scene's 0.2")
+    ap.add_argument("--body-friction", type=float, default=None, help="the body collider's friction instead of the scene's")
+    ap.add_argument("--rest-poses", default="authored,sag-free", help="which runs: authored, sag-free or both")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
     args = ap.parse_args(argv)
+    poses = [p for p in args.rest_poses.split(",") if p]
+    if not poses or any(p not in ("authored", "sag-free") for p in poses):
+        ap.error(f"--rest-poses takes authored and/or sag-free, got {args.rest_poses!r}")
     if args.frames is None:
         args.frames = 240 if args.motion == "head_turn" else 48
     bench = Bench("rest_pose", argv)
     rows = {}
     with tempfile.TemporaryDirectory() as work:
         for groom in args.grooms.split(","):
-            rows[groom] = {rp: run(groom, rp, args, work) for rp in ("authored", "sag-free")}
+            rows[groom] = {rp: run(groom, rp, args, work) for rp in poses}
+            if poses == ["sag-free"] and "error" not in rows[groom]["sag-free"]:
+                b = rows[groom]["sag-free"]
+                print(f"{groom:9s} {b['strands']:4d} strands, sag-free: p90 drift at the end {b['drift_p90_last_mm']:8.3f} mm, "
+                      f"largest p90 over the run {b['drift_p90_max_mm']:.1f} mm; at rest {b['came_to_rest']}; "
+                      f"{b['ms_per_frame']:.0f} ms/frame", flush=True)
+                continue
+            if len(poses) < 2:
+                print(f"{groom}: {rows[groom]}")
+                continue
             a, b = rows[groom]["authored"], rows[groom]["sag-free"]
             if "error" in a or "error" in b:
                 print(f"{groom}: failed: {a.get('error') or b.get('error')}")
@@ -134,7 +172,9 @@ def main(argv=None) -> int:
                   f"p90 drift {b.get('held_stable_drift_p90_last_mm', float('nan')):.3f} mm", flush=True)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     bench.write(args.out, dict(frames=args.frames, motion=args.motion, contacts=args.contacts,
-                               iterations=args.iterations or 10, grooms=rows))
+                               iterations=args.iterations or 10, amplitude=args.amplitude or 40.0,
+                               air_viscosity=args.air_viscosity, friction=args.friction,
+                               body_friction=args.body_friction, grooms=rows))
     print(f"wrote {args.out}")
     return 0
 
