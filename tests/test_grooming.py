@@ -238,6 +238,28 @@ def test_scale_curl_scales_the_rest_curvature_of_the_selection_only():
     assert np.all(turning_angles(strand(s.groom, 2, True)) < 1e-7)  # straightened
 
 
+def test_replace_strands_swaps_in_exactly_the_given_strands_in_the_arrays_dtypes_and_names_a_wrong_count():
+    # replace_strands gathers every replaced vertex at once; the claim is the per-strand slice assignment's:
+    # strands of ``new`` get their new poses cast to the arrays' dtypes, every other vertex keeps its bits.
+    from taichi_hair.groom.edits import replace_strands
+
+    rng = np.random.default_rng(3)
+    counts = np.array([3, 5, 2, 4, 6])
+    off = np.concatenate([[0], np.cumsum(counts)])
+    pts = rng.normal(size=(off[-1], 3)).astype(np.float32)
+    rest = rng.normal(size=(off[-1], 3))
+    new = {3: (rng.normal(size=(4, 3)), rng.normal(size=(4, 3))), 1: (rng.normal(size=(5, 3)), rng.normal(size=(5, 3)))}
+    p2, r2 = replace_strands(pts, rest, off, new)
+    want_p, want_r = pts.copy(), rest.copy()
+    for s_, (c, r) in new.items():
+        want_p[off[s_]:off[s_ + 1]] = c.astype(np.float32)
+        want_r[off[s_]:off[s_ + 1]] = r
+    assert p2.dtype == np.float32 and np.array_equal(p2, want_p) and np.array_equal(r2, want_r)
+    assert np.array_equal(pts[:3], p2[:3])  # the inputs are not changed in place
+    with pytest.raises(ValueError, match="strand 3 has 4 vertices"):
+        replace_strands(pts, rest, off, {3: (np.zeros((5, 3)), np.zeros((5, 3)))})
+
+
 def test_undo_redo_restore_bit_for_bit():
     s = session()
     states = [s.groom.copy()]

@@ -16,7 +16,7 @@ grooming session moves in place of a vertex of a skinned strand.
 import numpy as np
 
 from ..model import Model
-from .guides import FRAMES, _as_polylines, _check_neighbours
+from .guides import FRAMES, _check_neighbours, _flat_polylines
 
 
 def _arc_fractions(points: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,7 +75,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         raise ValueError(f"compute_binding: field 'frame' must be one of {FRAMES}, got {frame!r}")
     if frame == "material" and guide_rest_frames is None:
         raise ValueError("compute_binding: field 'guide_rest_frames' is needed for frame='material'")
-    polylines = _as_polylines(strands, "compute_binding: field 'strands'")
+    P, counts = _flat_polylines(strands, "compute_binding: field 'strands'")
     h = guide_model.host
     gstart = h["strand_vertex_start"].astype(np.int64)
     gcount = h["strand_vertex_count"].astype(np.int64)
@@ -84,16 +84,16 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     if gidx.shape[0] != ng:
         raise ValueError(f"compute_binding: field 'guide_indices' has {gidx.shape[0]} entries but the guide model "
                          f"has {ng} strands (root count mismatch)")
-    ns = len(polylines)
+    ns = counts.size
     if gidx.size and (gidx.min() < 0 or gidx.max() >= ns):
         raise ValueError(f"compute_binding: field 'guide_indices' must index the {ns} render strands")
     if np.unique(gidx).size != gidx.size:
         raise ValueError("compute_binding: field 'guide_indices' has repeated strands")
     X = h["vertex_rest_position"].astype(np.float64)
-    counts = np.array([p.shape[0] for p in polylines], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     mismatch = np.where(counts[gidx] != gcount)[0]
     if not mismatch.size:
-        gp = np.concatenate([polylines[s] for s in gidx])
+        gp = P[np.repeat(starts[gidx] - (np.cumsum(gcount) - gcount), gcount) + np.arange(int(gcount.sum()))]
         far = np.any(np.abs(gp - X) > 1e-9, axis=1)
         mismatch = np.unique(np.repeat(np.arange(ng), gcount)[far])
     if mismatch.size:
@@ -101,8 +101,6 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         raise ValueError(f"compute_binding: field 'guide_indices': guide {g} is not render strand {int(gidx[g])} "
                          "(different rest polyline)")
 
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    P = np.concatenate(polylines)
     nv = P.shape[0]
     strand_of = np.repeat(np.arange(ns), counts)
     local = np.arange(nv) - starts[strand_of]

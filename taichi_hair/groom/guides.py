@@ -121,7 +121,8 @@ def build_guides(strands, materials=None, config: SkinningConfig | None = None, 
         and the guide :class:`Model`.
     """
     config = config or SkinningConfig()
-    polylines = _as_polylines(strands, "build_guides: field 'strands'")
+    flat, counts = _flat_polylines(strands, "build_guides: field 'strands'")
+    polylines = np.split(flat, np.cumsum(counts)[:-1])
     ns = len(polylines)
     mats = _per_strand(materials, ns, "build_guides: field 'materials'", RodMaterial())
     bodies = _per_strand(body, ns, "build_guides: field 'body'", 0)
@@ -141,10 +142,13 @@ def _as_points(a, name: str) -> np.ndarray:
     return arr
 
 
-def _as_polylines(strands, name: str) -> list:
-    """Validate render polylines (vectorised over strands); returns a list of (m_s, 3) float64 arrays."""
+def _flat_polylines(strands, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validate render polylines (vectorised over strands): ``(P, counts)``, the vertices of all strands one
+    after another as a new (V, 3) float64 array [m] and each strand's vertex count (S,).  A (S, m, 3) array
+    (strands of one vertex count) is taken whole, without a per-strand slice."""
     if isinstance(strands, np.ndarray) and strands.ndim == 3 and strands.shape[2] == 3:
-        out = list(np.asarray(strands, dtype=np.float64))
+        flat = np.array(strands, dtype=np.float64).reshape(-1, 3)
+        counts = np.full(strands.shape[0], strands.shape[1], dtype=np.int64)
     else:
         out = []
         try:
@@ -152,14 +156,14 @@ def _as_polylines(strands, name: str) -> list:
                 out.append(points_array(p, f"{name}[{i}]", "m"))
         except TypeError:
             raise ValueError(f"{name} must be a sequence of (m, 3) polylines") from None
-    if not out:
+        counts = np.array([p.shape[0] for p in out], dtype=np.int64)
+        flat = np.concatenate(out) if out else np.zeros((0, 3))
+    if not counts.size:
         raise ValueError(f"{name} is empty")
-    counts = np.array([p.shape[0] for p in out], dtype=np.int64)
     short = np.where(counts < 2)[0]
     if short.size:
         i = int(short[0])
         raise ValueError(f"{name}[{i}] has {counts[i]} vertices; a strand needs at least 2")
-    flat = np.concatenate(out)
     strand_of = np.repeat(np.arange(counts.size), counts)
     bad = np.where(~np.all(np.isfinite(flat), axis=1))[0]
     if bad.size:
@@ -168,7 +172,7 @@ def _as_polylines(strands, name: str) -> list:
     zero = np.where(same & np.all(flat[1:] == flat[:-1], axis=1))[0]
     if zero.size:
         raise ValueError(f"{name}[{int(strand_of[zero[0]])}] has a zero-length edge (repeated point)")
-    return out
+    return flat, counts
 
 
 def _per_strand(value, count: int, name: str, default):
