@@ -67,3 +67,35 @@ def test_the_shipped_ponytail_solved_sag_free_holds_within_1_mm_with_contacts_wh
     assert drift["authored"] > 20e-3, drift  # the authored tail does fall
     assert drift["sag-free"] <= 1e-3, drift
     assert drift["sag-free"] <= 0.1 * drift["authored"], drift
+
+
+def test_a_sag_free_groom_returns_within_1_mm_of_its_authored_shape_after_a_10_degree_head_turn(tmp_path):
+    # Claim (issue 14 item 3, the head turn, at a test's size: 60 wavy strands x 16 vertices on assets/head.obj,
+    # hair-hair friction 0.2, head friction 0.3, air drag 1e-4 Pa s as the shipped scene, 10 ADMM iterations):
+    # the head turns 10 degrees and back (one 2 s cycle from 0.25 s); 5 s after the turn (168 frames) the p90
+    # drift from the authored shape is <= 1 mm, and the turn did carry the groom (p90 > 5 mm on the way, in the
+    # world frame the drift is measured in: the head is back at its start pose after the cycle).
+    # Measured at this size: 0.036 mm at the end, 22.6 mm largest.  At 300 x 24 (BENCHMARKS.md, issue 14):
+    # straight 0.04, wavy 0.75, curly 1.08 mm (still settling).  Not claimed:
+    # the 40 degree turn of the shipped scene, which reorders strands (2-7 mm stay; BENCHMARKS.md).
+    from bench_rest_pose import scene_text
+
+    text = scene_text("wavy", "head_turn").replace("strands = 300", "strands = 60")
+    text = text.replace("vertices_per_strand = 24", "vertices_per_strand = 16")
+    assert "\namplitude = 40.0" in text
+    text = text.replace("\namplitude = 40.0", "\namplitude = 10.0", 1)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(text)
+    out = tmp_path / "turn"
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run([sys.executable, "-m", "taichi_hair.cli", "simulate", str(scene), "--rest-pose", "sag-free",
+                           "--frames", "168", "--out", str(out), "--quiet"],
+                          capture_output=True, text=True, timeout=900, env=env, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    with np.load(os.path.join(out, "frames.npz")) as z:
+        pos, starts = z["positions"].astype(np.float64), z["strand_vertex_start"]
+    free = np.ones(pos.shape[1], bool)
+    free[starts] = False
+    p90 = np.percentile(np.linalg.norm(pos - pos[0], axis=2)[:, free], 90, axis=1)  # per frame [m]
+    assert p90.max() > 5e-3, p90.max()  # the turn moves the groom (the claim below is not vacuous)
+    assert p90[-1] <= 1e-3, p90[-1]
