@@ -239,8 +239,8 @@ def test_scale_curl_scales_the_rest_curvature_of_the_selection_only():
 
 
 def test_replace_strands_swaps_in_exactly_the_given_strands_in_the_arrays_dtypes_and_names_a_wrong_count():
-    # replace_strands gathers every replaced vertex at once; the claim is the per-strand slice assignment's:
-    # strands of ``new`` get their new poses cast to the arrays' dtypes, every other vertex keeps its bits.
+    # Claim: the strands of ``new`` get their new poses cast to the arrays' dtypes, every other vertex keeps its
+    # bits, the inputs are not changed, and a new pose of another vertex count is named (not a numpy broadcast error).
     from taichi_hair.groom.edits import replace_strands
 
     rng = np.random.default_rng(3)

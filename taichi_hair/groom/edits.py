@@ -124,17 +124,12 @@ def replace_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.nda
     strand's vertex count) swapped in, in the arrays' dtypes; the other strands bit for bit."""
     pts = points.copy()
     rest = rest_points.copy()
-    if new:  # one gather of every replaced vertex (a slice per strand cost 0.1 s for 8,600 strands)
-        off = np.asarray(offsets, dtype=np.int64)
-        s = np.fromiter(new.keys(), dtype=np.int64, count=len(new))
-        counts = off[s + 1] - off[s]
-        for k, (strand, (cur, rp)) in enumerate(new.items()):
-            if len(cur) != counts[k] or len(rp) != counts[k]:
-                raise ValueError(f"replace_strands: strand {strand} has {counts[k]} vertices, its new poses "
-                                 f"{len(cur)} and {len(rp)}")
-        rows = np.repeat(off[s] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-        pts[rows] = np.concatenate([cur for cur, _ in new.values()]).astype(pts.dtype)
-        rest[rows] = np.concatenate([rp for _, rp in new.values()]).astype(rest.dtype)
+    for s, (cur, rp) in new.items():
+        a, b = offsets[s], offsets[s + 1]
+        if len(cur) != b - a or len(rp) != b - a:
+            raise ValueError(f"replace_strands: strand {s} has {b - a} vertices, its new poses {len(cur)} and {len(rp)}")
+        pts[a:b] = cur.astype(pts.dtype)
+        rest[a:b] = rp.astype(rest.dtype)
     return pts, rest
 
 
