@@ -384,7 +384,11 @@ class SolverADMMConfig:
     """Settings of :class:`taichi_hair.SolverADMM` (Daviet 2023, Sec. 4).
 
     Attributes:
-        iterations: ADMM iterations per step (Algorithm 1's loop) [-].
+        iterations: ADMM iterations per step (Algorithm 1's loop) [-].  The paper's 10 do not converge a
+            step on curved hair: in the head-turn scene (wavy, twist solved) 10 iterations leave 23-30 %
+            of a substep's displacement (160: 10-11 %), with or without contacts
+            (``benchmarks/probes/head_turn_convergence.py``), and the hair lags a turning head and swings
+            about twice as far as converged steps (BENCHMARKS.md, issue 14).
         mode: ``"dynamic"`` (implicit time integration, Sec. 4.2; see
             ``integrator``) or ``"quasistatic"`` (inertia and drag dropped;
             each call to ``step`` runs more iterations of the same minimisation).
