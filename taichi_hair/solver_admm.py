@@ -78,8 +78,8 @@ from .state import Control, State
 from .strains import BERGOU, KORNER
 from .tridiag import TridiagonalSolver
 
-#: The ADMM weight of a prestressed pair (a sag-free rest pose) is at least this times the pair's prestress
-#: ratio |mu| / S times its w0 = 1 weight (``SolverADMM._set_coefficients``) [-].
+#: In the quasistatic mode the ADMM weight of a prestressed pair (a sag-free rest pose) is at least this times
+#: the pair's prestress ratio |mu| / S times its w0 = 1 weight (``SolverADMM._set_coefficients``) [-].
 PRESTRESS_WEIGHT = 400.0
 
 #: Profiled stages.  The stage schedule fills local/global/frames/twist; the strand
@@ -228,8 +228,14 @@ class SolverADMM(SolverBase):
             # (still growing), 400 -> 2.8 um (w0 = 25 everywhere: 2.1 um).  Under a head turn sag-free strands
             # do not come back (BENCHMARKS, sag-free rest pose; at 100 as at 400); the prestress term in the
             # local step's Hessian (Newton instead of Gauss-Newton) is the next thing to try, not a larger weight.
-            rho = np.where(active, np.linalg.norm(mu[:, :2] / safe[:, :2], axis=1), 0.0)
-            weight = np.maximum(weight, PRESTRESS_WEIGHT * rho * weight / cfg.w0)
+            # Quasistatic mode only (2026-12-05): in the dynamic mode the inertia m/dt^2 in the global step keeps
+            # the iteration at the equilibrium without it (wavy groom on the head, still, 2 s: p90 0.004 mm), and
+            # the raised weight cost the convergence of every step: in the head turn 10 iterations left 23 % of a
+            # substep's displacement without contacts (0.5 % without the raise) and 30 % with them (12 %)
+            # (benchmarks/probes/head_turn_convergence.py; BENCHMARKS.md, issue 14).
+            if not self.dynamic:
+                rho = np.where(active, np.linalg.norm(mu[:, :2] / safe[:, :2], axis=1), 0.0)
+                weight = np.maximum(weight, PRESTRESS_WEIGHT * rho * weight / cfg.w0)
         # Weights past the solver's float type (an absurd w0, issue 17): one line naming the field, not numpy's
         # "overflow encountered in cast" and a divergence at step 1.
         top = float(np.finfo(f).max) / 1e6  # headroom: W_y is summed and multiplied in the global step

@@ -2,7 +2,7 @@
 
 Run from the repository root:
     python3 benchmarks/probes/head_turn_convergence.py [--frame F] [--contacts all|body|none]
-        [--iterations 10,20,40,80,160] [--reference 2000] [--strands 300]
+        [--iterations 10,20,40,80,160] [--reference 2000] [--strands 300] [--w0 W]
 
 The scene is ``benchmarks/bench_rest_pose.py``'s head turn (the wavy groom on ``assets/head.obj``, sag-free,
 hair-hair friction 0.2, a 40 degree turn of 2 s from 0.25 s).  It is simulated at the scene's 10 iterations
@@ -12,7 +12,8 @@ and with ``--reference`` iterations as the reference.  Printed per count: the p9
 from the reference after the step, and the same for the step's displacement (x^{t+1} - x^t), as a fraction.
 ``--contacts body`` drops the hair-hair contacts (the head stays a collider), ``none`` drops the head too, to
 separate the elastic iteration's convergence from the contacts'.  CPU runs are deterministic, so every count
-starts from the same bits.  A diagnostic, not a benchmark.
+starts from the same bits.  ``--w0`` sets ``SolverADMMConfig.w0`` (the elasticity weights' scale) for the whole
+run; the step it converges to does not depend on it.  A diagnostic, not a benchmark.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ def main(argv=None) -> int:
     ap.add_argument("--iterations", default="10,20,40,80,160")
     ap.add_argument("--reference", type=int, default=2000)
     ap.add_argument("--strands", type=int, default=300)
+    ap.add_argument("--w0", type=float, default=None, help="SolverADMMConfig.w0 instead of the default 1")
     args = ap.parse_args(argv)
     counts = [int(c) for c in args.iterations.split(",")]
 
@@ -62,6 +64,9 @@ def main(argv=None) -> int:
     state, control = model.state(), model.control()
     control.gravity = tuple(scene.gravity)
     solver = scene.make_solver(model)
+    if args.w0 is not None:
+        solver.config.w0 = args.w0
+        solver.refresh_model()
     dt = 1.0 / (scene.fps * scene.substeps)
 
     def set_bodies(t):
@@ -86,7 +91,7 @@ def main(argv=None) -> int:
 
     ref = step(args.reference)
     move = np.linalg.norm(ref - x_begin, axis=1)
-    print(f"head turn, {args.strands} strands, contacts {args.contacts}, state at frame {args.frame} "
+    print(f"head turn, {args.strands} strands, contacts {args.contacts}, w0 {solver.config.w0}, state at frame {args.frame} "
           f"(t = {steps * dt:.3f} s), dt = {dt:.5f} s; reference {args.reference} iterations: step displacement "
           f"p90 {1e3 * np.percentile(move, 90):.3f} mm, max {1e3 * move.max():.3f} mm")
     print(f"{'iterations':>10} {'p90 error [mm]':>15} {'max error [mm]':>15} {'p90 / p90 move':>15}")
