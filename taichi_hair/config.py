@@ -73,6 +73,13 @@ class MassSplitting(StrEnum):
     NONE = "none"
 
 
+class WeightTime(StrEnum):
+    """The time dt~ of the collision weights W_z = m / dt~^2 (``ContactConfig.weight_time``)."""
+
+    PAPER = "paper"  # dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) in both modes (Sec. 4.5)
+    STEP = "step"    # dynamic mode: min(dt, sqrt(L~/|g|)), the bending time left out; quasistatic: the paper's
+
+
 def as_choice(enum: type, owner: str, name: str, value):
     """``value`` (a string or a member) as a member of ``enum``, or a ValueError naming ``owner.name`` and the
     choices."""
@@ -310,14 +317,27 @@ class ContactConfig:
             statistics count the contacts that hold a rest overlap (``rest_overlap_contacts``), and their
             penetration is measured past the reduced thickness.  False: the paper's r_a + r_b for every
             pair [-].
+        weight_time: ``"paper"`` (default): dt~ = min(dt, sqrt(L~/|g|), bending time) in both modes, W_z of
+            the order of the bending weights.  ``"step"``: in the dynamic mode dt~ = min(dt, sqrt(L~/|g|)),
+            W_z of the order of the inertia m/dt^2 (Daviet 2020's scaling); the quasistatic mode, which has
+            no dt, keeps the paper's.  Measured 2026-12-05 (BENCHMARKS.md, issue 14): in the head turn
+            (sag-free wavy groom, hair-hair and head contacts, mid-turn) 10 iterations leave 4.5 % of a
+            substep's displacement with "step" against 12 % with "paper"
+            (``benchmarks/probes/head_turn_convergence.py``), and after a 40 degree turn the groom comes back
+            to 1.0 mm p90 instead of 8.6 mm; the hairball (300 strands, 12 frames) keeps its strain (p99
+            0.003 % against 0.008 %) and hair-pair penetration (p99 5.5 um either way).  But where a contact
+            must bend a strand against its stiffness the lighter weight converges too slowly: a strand
+            threaded through a 2 cm sphere's centre keeps 4 vertices 2.6-18 mm inside after 2 s with "step"
+            (none with "paper", ``tests/test_contacts.py``).  Hence not the default.
 
-    Collision weights follow the paper: W_z = m / dt~^2 with
-    dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)).  For short edges of
-    thin hair the bending time is far below dt (2 mm edges, R = 0.05 mm:
-    W_z ~ 1700 m/dt^2 at dt = 1/240 s), and ADMM then needs many iterations
-    to let hair *slide* along a collider: measured on an incline, 20
-    iterations give ~1 % of the Coulomb sliding distance with 2 mm edges and
-    0.1 % error with 1 cm edges (``tests/test_contacts.py``).
+    Collision weights W_z = m / dt~^2 (``weight_time``).  The paper's
+    dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) takes the bending time of one
+    edge, which for thin hair is far below dt (2 mm edges, R = 0.05 mm:
+    W_z ~ 1700 m/dt^2 at dt = 1/240 s; 7.5 mm edges at dt = 1/96 s: ~50 m/dt^2), and
+    ADMM then needs many iterations to let hair *slide* along a collider or another
+    strand: measured on an incline, 20 iterations give ~1 % of the Coulomb sliding
+    distance with 2 mm edges and 0.1 % error with 1 cm edges (``tests/test_contacts.py``,
+    paper weights).
     """
 
     hair_hair: bool = True
@@ -344,6 +364,7 @@ class ContactConfig:
     late_body_contacts: bool = True
     rigid_reach: bool = False
     keep_rest_overlaps: bool = True
+    weight_time: WeightTime = WeightTime.PAPER
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):
@@ -369,6 +390,7 @@ class ContactConfig:
                                                self.correction_edge_order)
         self.correction_mass_splitting = as_choice(MassSplitting, "ContactConfig", "correction_mass_splitting",
                                                    self.correction_mass_splitting)
+        self.weight_time = as_choice(WeightTime, "ContactConfig", "weight_time", self.weight_time)
         if not isinstance(self.correction_hair_friction, bool):
             raise ValueError("ContactConfig.correction_hair_friction must be a bool, got "
                              f"{self.correction_hair_friction!r}")
@@ -384,11 +406,11 @@ class SolverADMMConfig:
     """Settings of :class:`taichi_hair.SolverADMM` (Daviet 2023, Sec. 4).
 
     Attributes:
-        iterations: ADMM iterations per step (Algorithm 1's loop) [-].  The paper's 10 do not converge a
-            step on curved hair: in the head-turn scene (wavy, twist solved) 10 iterations leave 23-30 %
-            of a substep's displacement (160: 10-11 %), with or without contacts
-            (``benchmarks/probes/head_turn_convergence.py``), and the hair lags a turning head and swings
-            about twice as far as converged steps (BENCHMARKS.md, issue 14).
+        iterations: ADMM iterations per step (Algorithm 1's loop) [-].  Measured in the head-turn scene
+            (sag-free wavy groom, mid-turn; ``benchmarks/probes/head_turn_convergence.py``): 10 iterations
+            leave 0.5 % of a substep's displacement without contacts but 12 % with hair-hair and head
+            contacts (40: 5.5 %, 160: 0.3 %), and the less converged groom swings further and settles
+            with more strands reordered (BENCHMARKS.md, issue 14).
         mode: ``"dynamic"`` (implicit time integration, Sec. 4.2; see
             ``integrator``) or ``"quasistatic"`` (inertia and drag dropped;
             each call to ``step`` runs more iterations of the same minimisation).

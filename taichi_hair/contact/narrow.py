@@ -337,7 +337,8 @@ def _batch_order_after(c: ti.i32, d: ti.i32) -> bool:
 @ti.kernel
 def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_base: ti.template(),
                     vertex_typical_length: ti.template(), vertex_dt_bend: ti.template(), dt: float,
-                    gravity_norm: float, dynamic: ti.template(), first_new: ti.i32, split_by_batch: ti.template()):
+                    gravity_norm: float, dynamic: ti.template(), first_new: ti.i32, split_by_batch: ti.template(),
+                    bending_time: ti.i32):
     """CSR vertex -> contacts (sorted), W_z (Sec. 4.5 "Collision constraint weights"), D_hat.
 
     Contacts from ``first_new`` on start from zero; with ``first_new`` = 0 (the proximity detection at the
@@ -391,12 +392,13 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             while e < end and con.vertex_contact_list[e] % BATCHES < b:
                 e += 1
             con.vertex_batch_start[i, b] = e
-        # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5).
+        # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5); with
+        # ``bending_time`` 0 (ContactConfig.weight_time "step", dynamic mode) the bending time is left out.
         # Kinematic (clamped) vertices do not move (1/W_z = 0) but still count in D_hat with the weight a
         # free vertex would have: see ``_delassus``.
         inv_w = 0.0
         if con.vertex_contact_count[i] > 0:
-            dtt = vertex_dt_bend[i]
+            dtt = vertex_dt_bend[i] if bending_time != 0 else 1e30
             if gravity_norm > 0.0:
                 dtt = ti.min(dtt, ti.sqrt(vertex_typical_length[i] / gravity_norm))
             if ti.static(dynamic):

@@ -8,7 +8,7 @@ and grown when the contact count overflows.
 import numpy as np
 import taichi as ti
 
-from ..config import CorrectionEdgeOrder, CorrectionLengths, MassSplitting
+from ..config import CorrectionEdgeOrder, CorrectionLengths, MassSplitting, WeightTime
 from ..solver_base import on_gpu
 
 from .narrow import SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts, write_contacts
@@ -122,6 +122,10 @@ class ContactPipeline:
         self.vertex_dt_bend.from_numpy((2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f))
         self.max_radius = float(radius.max())
 
+    def _bending_time(self, dynamic: bool) -> int:
+        """1 when W_z's dt~ takes the edge's bending time (``ContactConfig.weight_time``)."""
+        return int(self.config.weight_time == WeightTime.PAPER or not dynamic)
+
     @property
     def contact_count(self) -> int:
         return min(int(self.con.contact_count[None]), self.con.capacity)
@@ -195,7 +199,7 @@ class ContactPipeline:
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                        dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH)
+                        dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH, self._bending_time(dynamic))
         self.detections += 1
         # Per-step statistics of the continuous passes and the late body contacts of this step.
         self.late_body_contacts = 0
@@ -242,7 +246,8 @@ class ContactPipeline:
         added = total - first
         if added > 0:
             build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                            self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == MassSplitting.BATCH)
+                            self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == MassSplitting.BATCH,
+                            self._bending_time(self._dynamic))
         self.continuous_contacts += added
         return added
 
@@ -274,7 +279,8 @@ class ContactPipeline:
                 break
             self._grow_contacts(total, keep=first)
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                        self._dt, self._gn, self._dynamic, first, self.config.mass_splitting == MassSplitting.BATCH)
+                        self._dt, self._gn, self._dynamic, first, self.config.mass_splitting == MassSplitting.BATCH,
+                        self._bending_time(self._dynamic))
         self.late_body_contacts += added
         return added
 
