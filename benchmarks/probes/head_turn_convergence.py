@@ -19,17 +19,31 @@ run; the step it converges to does not depend on it.  A diagnostic, not a benchm
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import sys
 import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
+
+
+def _load(name: str, path: str):
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _bench_rest_pose():
+    """benchmarks/bench_rest_pose.py by its path (it imports ``harness``, beside it: loaded first)."""
+    bench_dir = os.path.dirname(HERE)
+    if "harness" not in sys.modules:
+        sys.modules["harness"] = _load("harness", os.path.join(bench_dir, "harness.py"))
+    return _load("_bench_rest_pose", os.path.join(bench_dir, "bench_rest_pose.py"))
 
 
 def scene_file(contacts: str, work: str) -> str:
-    import bench_rest_pose as brp
-
+    brp = _bench_rest_pose()
     text = brp.scene_text("wavy", "head_turn").replace("[groom]\n", '[groom]\nrest_pose = "sag-free"\n', 1)
     if contacts in ("body", "none"):
         text = brp.without_hair_contacts(text)
