@@ -2,7 +2,8 @@
 
     python3 benchmarks/bench_rest_pose.py [--frames N] [--strands 300] [--grooms straight,wavy,curly,ponytail]
         [--motion still|head_turn] [--contacts all|body] [--iterations N] [--amplitude DEG] [--air-viscosity XI]
-        [--friction MU] [--body-friction MU] [--rest-poses authored,sag-free] [--out benchmarks/results/rest_pose.json]
+        [--friction MU] [--body-friction MU] [--weight-time paper|step] [--rest-poses authored,sag-free]
+        [--out benchmarks/results/rest_pose.json]
 
 For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
 ``assets/scenes/ponytail.toml``) with its body still (``--motion still``) or turning, hair-hair and body contacts
@@ -78,6 +79,8 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
         b = text.index("\nfriction = ", a)
         e = text.index("\n", b + 1)
         text = text[:b] + f"\nfriction = {float(args.body_friction)!r}" + text[e:]
+    if args.weight_time is not None:
+        text = text.replace("[solver.contacts]\n", f"[solver.contacts]\nweight_time = {json.dumps(args.weight_time)}\n", 1)
     if args.contacts == "body":
         text = without_hair_contacts(text)
     with open(path, "w") as fh:
@@ -136,6 +139,8 @@ def main(argv=None) -> int:
                     help="[solver] air_viscosity xi [Pa s] instead of the scenes' 1e-4 (0: no air)")
     ap.add_argument("--friction", type=float, default=None, help="hair-hair friction instead of the scene's 0.2")
     ap.add_argument("--body-friction", type=float, default=None, help="the body collider's friction instead of the scene's")
+    ap.add_argument("--weight-time", choices=("paper", "step"), default=None,
+                    help="ContactConfig.weight_time of the hair-hair and body contacts (default: the scene's, paper)")
     ap.add_argument("--rest-poses", default="authored,sag-free", help="which runs: authored, sag-free or both")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
     args = ap.parse_args(argv)
@@ -174,7 +179,7 @@ def main(argv=None) -> int:
     bench.write(args.out, dict(frames=args.frames, motion=args.motion, contacts=args.contacts,
                                iterations=args.iterations or 10, amplitude=args.amplitude or 40.0,
                                air_viscosity=args.air_viscosity, friction=args.friction,
-                               body_friction=args.body_friction, grooms=rows))
+                               body_friction=args.body_friction, weight_time=args.weight_time, grooms=rows))
     print(f"wrote {args.out}")
     return 0
 
