@@ -80,7 +80,9 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
         e = text.index("\n", b + 1)
         text = text[:b] + f"\nfriction = {float(args.body_friction)!r}" + text[e:]
     if args.weight_time is not None:
-        text = text.replace("[solver.contacts]\n", f"[solver.contacts]\nweight_time = {json.dumps(args.weight_time)}\n", 1)
+        assert "\n[solver.contacts]" in text, "the scene has no [solver.contacts] table"
+        a = text.index("\n", text.index("\n[solver.contacts]") + 1)  # the table's line may carry a comment
+        text = text[:a + 1] + f"weight_time = {json.dumps(args.weight_time)}\n" + text[a + 1:]
     if args.contacts == "body":
         text = without_hair_contacts(text)
     with open(path, "w") as fh:
