@@ -93,7 +93,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     mismatch = np.where(counts[gidx] != gcount)[0]
     if not mismatch.size:
-        gp = P[np.repeat(starts[gidx] - (np.cumsum(gcount) - gcount), gcount) + np.arange(int(gcount.sum()))]
+        gp = P[_vertex_rows(starts[gidx], gcount)]
         far = np.any(np.abs(gp - X) > 1e-9, axis=1)
         mismatch = np.unique(np.repeat(np.arange(ng), gcount)[far])
     if mismatch.size:
@@ -124,8 +124,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         out["guide_vertex_rest_position"] = X
         if redo.size:
             nbr = previous["render_strand_guides"]
-            cnt = counts[redo]
-            v = np.repeat(starts[redo] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+            v = _vertex_rows(starts[redo], counts[redo])
             j, u, c = _bind_vertices(P[v], counts[redo], local[v], strand_of[v], nbr, geometry)
             for key, val in (("render_vertex_bind_edge", j), ("render_vertex_bind_param", u),
                              ("render_vertex_bind_local", c)):
@@ -168,6 +167,11 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         "render_vertex_bind_weight": w[strand_of],
         "guide_vertex_rest_position": X,
     }
+
+
+def _vertex_rows(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The vertex rows of strands starting at ``starts`` with ``counts`` vertices, one strand after another."""
+    return np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
 
 
 def _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame):

@@ -40,8 +40,19 @@ def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _arc(p: np.ndarray) -> np.ndarray:
-    """Cumulative arc length at every vertex of polyline p [m], shape (m,)."""
-    return np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))))
+    """Cumulative arc length at every vertex of polyline p (m, 3), or of G polylines (G, m, 3) [m]: shape
+    (m,) or (G, m)."""
+    seg = np.cumsum(np.linalg.norm(np.diff(p, axis=-2), axis=-1), axis=-1)
+    return np.concatenate([np.zeros(seg.shape[:-1] + (1,)), seg], axis=-1)
+
+
+def _groups(offsets: np.ndarray, strands: np.ndarray):
+    """The strands of one vertex count m together: (group, idx) per m, ``group`` the strand indices and
+    ``idx`` (len(group), m) their vertex rows, to edit them as (strands, vertices, 3) arrays."""
+    counts = offsets[strands + 1] - offsets[strands]
+    for m in np.unique(counts):
+        group = strands[counts == m]
+        yield group, offsets[group][:, None] + np.arange(m)
 
 
 def _sample(knots: np.ndarray, points: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -53,7 +64,7 @@ def _sample(knots: np.ndarray, points: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def _batch_perpendicular(t: np.ndarray) -> np.ndarray:
-    """A unit vector across each unit row of t (G, 3), as :func:`_perpendicular` row by row."""
+    """A unit vector across each unit row of t (G, 3): t x z, or t x x where t is within ~25 degrees of z."""
     a = np.where((np.abs(t[:, 2]) < 0.9)[:, None], np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]))
     return _batch_unit(np.cross(t, a))
 
@@ -61,7 +72,7 @@ def _batch_perpendicular(t: np.ndarray) -> np.ndarray:
 def _batch_rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rodrigues rotation of the rows of v about the unit rows of ``axis`` by ``angle`` (G,) [rad]."""
     c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    return v * c + np.cross(axis, v) * s + axis * np.einsum("gi,gi->g", axis, v)[:, None] * (1.0 - c)
+    return v * c + np.cross(axis, v) * s + axis * _dot(axis, v)[:, None] * (1.0 - c)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -147,24 +158,20 @@ def trim_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.ndarra
     Returns:
         dict strand -> (current, rest), float64 (m_s, 3) each, of the cut strands only.
     """
-    off = offsets
+    off = np.asarray(offsets, dtype=np.int64)
     dist = (points.astype(np.float64) - plane_point) @ normal
     # Candidates: strands with a vertex on the other side of the plane from their root.
-    side = np.repeat(np.sign(dist[off[:-1]]), np.diff(np.asarray(off, dtype=np.int64)))
+    side = np.repeat(np.sign(dist[off[:-1]]), np.diff(off))
     crosses = np.logical_or.reduceat(dist * side <= 0.0, off[:-1]) & (dist[off[:-1]] != 0.0) & chosen
     new = {}
-    cut = np.nonzero(crosses)[0]
-    counts = np.diff(np.asarray(off, dtype=np.int64))[cut]
-    for m in np.unique(counts):  # the strands of one vertex count together, as (strands, vertices, 3) arrays
-        group = cut[counts == m]
-        idx = np.asarray(off, dtype=np.int64)[group][:, None] + np.arange(m)
+    for group, idx in _groups(off, np.nonzero(crosses)[0]):
+        m = idx.shape[1]
         cur, rest, d = points[idx].astype(np.float64), rest_points[idx].astype(np.float64), dist[idx]
         k = np.argmax(d * np.sign(d[:, :1]) <= 0.0, axis=1)  # the first vertex across the plane
         j = k - 1
         rows = np.arange(group.size)
         u = d[rows, j] / (d[rows, j] - d[rows, k])
-        c = np.concatenate([np.zeros((group.size, 1)),
-                            np.cumsum(np.linalg.norm(np.diff(rest, axis=1), axis=2), axis=1)], axis=1)
+        c = _arc(rest)
         length = c[rows, j] + u * (c[rows, j + 1] - c[rows, j])
         new_cur, new_rest = _batch_resample(cur, rest, np.full(group.size, m), (c / c[:, -1:]) * length[:, None])
         # The last vertex exactly on the plane (the same rest arc length cuts the rest pose).
@@ -200,10 +207,7 @@ def scale_length_strands(points: np.ndarray, rest_points: np.ndarray, offsets: n
     new = {}
     if f == 1.0 or strands.size == 0:
         return new
-    counts = off[strands + 1] - off[strands]
-    for m in np.unique(counts):
-        group = strands[counts == m]
-        idx = off[group][:, None] + np.arange(m)
+    for group, idx in _groups(off, strands):
         cur, rest = _scale_length_group(points[idx].astype(np.float64), rest_points[idx].astype(np.float64), f)
         for row, s in enumerate(group.tolist()):
             new[s] = (cur[row], rest[row])
@@ -213,7 +217,7 @@ def scale_length_strands(points: np.ndarray, rest_points: np.ndarray, offsets: n
 def _batch_pair_frames(t0: np.ndarray, t1: np.ndarray):
     """Orthonormal frames (columns t0, n, t0 x n; n the part of t1 across t0) of rows of unit tangents
     (G, 3): frames (G, 3, 3), and which rows have one (t1 not parallel to t0)."""
-    n = t1 - np.einsum("gi,gi->g", t1, t0)[:, None] * t0
+    n = t1 - _dot(t1, t0)[:, None] * t0
     ln = np.linalg.norm(n, axis=1)
     ok = ln >= 1e-9
     n = n / np.where(ok, ln, 1.0)[:, None]
@@ -227,7 +231,7 @@ def _batch_unit(v: np.ndarray) -> np.ndarray:
 def _scale_length_group(cur: np.ndarray, rest: np.ndarray, f: float):
     """:func:`scale_length_strands` of G strands of m vertices each, (G, m, 3) float64 -> both new poses."""
     G, m, _ = rest.shape
-    c = np.concatenate([np.zeros((G, 1)), np.cumsum(np.linalg.norm(np.diff(rest, axis=1), axis=2), axis=1)], axis=1)
+    c = _arc(rest)
     total = c[:, -1]
     ext_cur, ext_rest, n_valid = cur, rest, np.full(G, m)
     if f > 1.0:
@@ -277,8 +281,7 @@ def _batch_resample(cur: np.ndarray, rest: np.ndarray, n_valid: np.ndarray, s: n
     between two old vertices is cut by the new chord: the rest length is ``length`` minus that chord
     shortening, and a curl finer than the new edge spacing is smoothed).  The root vertex is kept bit for bit.
     """
-    knots = np.concatenate([np.zeros((rest.shape[0], 1)),
-                            np.cumsum(np.linalg.norm(np.diff(rest, axis=1), axis=2), axis=1)], axis=1)
+    knots = _arc(rest)
     cols = np.arange(knots.shape[1])
     knots_valid = np.where(cols[None, :] < n_valid[:, None], knots, np.inf)
     j = np.count_nonzero(knots_valid[:, None, :] <= s[:, :, None], axis=2) - 1
@@ -309,9 +312,7 @@ def scale_curl_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.
     strands = np.asarray(strands, dtype=np.int64).reshape(-1)
     rest = rest_points.copy()
     pts = points.copy()
-    counts = off[strands + 1] - off[strands]
-    for m in np.unique(counts):  # the strands of one vertex count together, as (strands, vertices, 3) arrays
-        idx = off[strands[counts == m]][:, None] + np.arange(m)
+    for _, idx in _groups(off, strands):
         q = _scale_curl_polylines(rest_points[idx].astype(np.float64), float(factor))
         q[:, :2] = rest_points[idx[:, :2]]  # the clamped root edge, bit for bit
         rest[idx] = q.astype(rest.dtype)
