@@ -2,7 +2,7 @@
 
     python3 benchmarks/bench_rest_pose.py [--frames N] [--strands 300] [--grooms straight,wavy,curly,ponytail]
         [--motion still|head_turn] [--contacts all|body] [--iterations N] [--amplitude DEG] [--air-viscosity XI]
-        [--friction MU] [--body-friction MU] [--weight-time paper|step] [--rest-poses authored,sag-free]
+        [--friction MU] [--body-friction MU] [--weight-time paper|step|hair-step] [--rest-poses authored,sag-free]
         [--out benchmarks/results/rest_pose.json]
 
 For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
@@ -59,6 +59,24 @@ def scene_text(groom: str, motion: str) -> str:
     return src
 
 
+def with_body_friction(text: str, mu: float) -> str:
+    """``text`` with every ``[[colliders]]`` table's friction set to ``mu`` (the line replaced, or added where
+    the table has none: the ponytail's spheres take the default)."""
+    parts = text.split("\n[[colliders]]\n")
+    for k in range(1, len(parts)):
+        lines = parts[k].split("\n")
+        end = next((j for j, ln in enumerate(lines) if ln.startswith("[")), len(lines))
+        hit = [j for j in range(end) if lines[j].startswith("friction =")]
+        if hit:
+            lines[hit[0]] = f"friction = {float(mu)!r}"
+        else:
+            lines.insert(0, f"friction = {float(mu)!r}")
+        parts[k] = "\n".join(lines)
+    if len(parts) == 1:
+        raise ValueError("the scene has no [[colliders]] table")
+    return "\n[[colliders]]\n".join(parts)
+
+
 def run(groom: str, rest_pose: str, args, work: str) -> dict:
     path = os.path.join(work, f"{groom}_{args.motion}.toml")
     text = scene_text(groom, args.motion).replace("[groom]\n", "[groom]\nrest_pose_check = true\n", 1)
@@ -75,10 +93,7 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
         assert "[solver.contacts]" in text and "\nfriction = 0.2\n" in text, "the scene's hair-hair friction line moved"
         text = text.replace("\nfriction = 0.2\n", f"\nfriction = {float(args.friction)!r}\n", 1)
     if args.body_friction is not None:
-        a = text.index("[[colliders]]")
-        b = text.index("\nfriction = ", a)
-        e = text.index("\n", b + 1)
-        text = text[:b] + f"\nfriction = {float(args.body_friction)!r}" + text[e:]
+        text = with_body_friction(text, args.body_friction)
     if args.weight_time is not None:
         assert "\n[solver.contacts]" in text, "the scene has no [solver.contacts] table"
         a = text.index("\n", text.index("\n[solver.contacts]") + 1)  # the table's line may carry a comment
@@ -141,7 +156,7 @@ def main(argv=None) -> int:
                     help="[solver] air_viscosity xi [Pa s] instead of the scenes' 1e-4 (0: no air)")
     ap.add_argument("--friction", type=float, default=None, help="hair-hair friction instead of the scene's 0.2")
     ap.add_argument("--body-friction", type=float, default=None, help="the body collider's friction instead of the scene's")
-    ap.add_argument("--weight-time", choices=("paper", "step"), default=None,
+    ap.add_argument("--weight-time", choices=("paper", "step", "hair-step"), default=None,
                     help="ContactConfig.weight_time of the hair-hair and body contacts (default: the scene's, paper)")
     ap.add_argument("--rest-poses", default="authored,sag-free", help="which runs: authored, sag-free or both")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))

@@ -239,26 +239,36 @@ def test_rod_resting_on_a_plane_stays_there():
     assert solver.contact_stats["sticking"] == 13
 
 
-@pytest.mark.parametrize("weight_time", ["paper", "step"])
+@pytest.mark.parametrize("weight_time", ["paper", "step", "hair-step"])
 def test_collision_weights_follow_the_chosen_time_scale(weight_time):
     # Closed form (Sec. 4.5; ContactConfig.weight_time): 1/W_z = dt~^2 / m_i for a vertex in contact, with
     # dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) ("paper") or min(dt, sqrt(L~/|g|)) ("step", dynamic
-    # mode).  A rod of 2.5 mm edges on a plane at dt = 1/240 s: the bending time (1.6e-4 s) is below dt, so the
-    # two differ by (dt / t_b)^2 ~ 160.  Tolerance 1e-5 relative (float32 fields).
+    # mode), the sqrt term dropped without gravity; "hair-step" takes the second on a vertex whose contacts
+    # are all hair-hair, the first on a vertex with a body contact.  Rod A (2.5 mm edges) lies on a plane, rod B crosses on top of it, touching A only;
+    # dt = 1/240 s.  The bending time (1.6e-4 s) is below dt, so the two differ by (dt / t_b)^2 ~ 160.
+    # Tolerance 1e-5 relative (float32 fields).
     b = GroomBuilder()
     b.add_strand(line((0, R, 0), (0.03, R, 0), 13), HAIR, root="free")
+    b.add_strand(line((0.015, 3 * R, -0.015), (0.015, 3 * R, 0.015), 13), HAIR, root="free")
     model = b.finalize()
     st, ctl = model.state(), model.control()
+    ctl.gravity = (0.0, 0.0, 0.0)  # no fall within the step to reach for: B (2R above the plane) touches A only
     dt = 1 / 240
-    solver = _solver(model, [PlaneCollider(friction=0.3)], weight_time=weight_time)
+    solver = _solver(model, [PlaneCollider(friction=0.3)], weight_time=weight_time, margin=2e-5)
     solver.step(st, ctl, dt)
     inv_w = solver.contacts.con.vertex_contact_inv_weight.to_numpy().astype(np.float64)
     m = model.host["vertex_mass"].astype(np.float64)
     L = 0.0025
     t_bend = 2 * L**2 / HAIR.radius * math.sqrt(HAIR.density / HAIR.youngs_modulus_bend)
-    t = min(dt, math.sqrt(L / 9.81)) if weight_time == "step" else min(dt, math.sqrt(L / 9.81), t_bend)
     assert t_bend < dt / 10  # the two choices do differ here
-    np.testing.assert_allclose(inv_w, t * t / m, rtol=1e-5)
+    t_paper = min(dt, t_bend)  # without gravity the sqrt(L~/|g|) term drops out
+    t_step = dt
+    t_body = t_step if weight_time == "step" else t_paper
+    t_hair = t_paper if weight_time == "paper" else t_step
+    np.testing.assert_allclose(inv_w[:13], t_body**2 / m[:13], rtol=1e-5)  # rod A: every vertex on the plane
+    touching = inv_w[13:] > 0
+    assert 2 <= touching.sum() <= 4  # rod B: the vertices of the edges that cross A
+    np.testing.assert_allclose(inv_w[13:][touching], t_hair**2 / m[13:][touching], rtol=1e-5)
 
 
 def _incline_runs(angles_deg, mu, steps=48, dt=1 / 240, plane_deg=30.0):

@@ -393,12 +393,18 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
                 e += 1
             con.vertex_batch_start[i, b] = e
         # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5); with
-        # ``bending_time`` 0 (ContactConfig.weight_time "step", dynamic mode) the bending time is left out.
+        # ``bending_time`` 0 (ContactConfig.weight_time "step", dynamic mode) the bending time is left out,
+        # with 2 ("hair-step") it is left out on a vertex whose contacts are all hair-hair.
         # Kinematic (clamped) vertices do not move (1/W_z = 0) but still count in D_hat with the weight a
         # free vertex would have: see ``_delassus``.
         inv_w = 0.0
         if con.vertex_contact_count[i] > 0:
-            dtt = vertex_dt_bend[i] if bending_time != 0 else 1e30
+            bend = bending_time == 1
+            if bending_time == 2:
+                for j in range(beg, end):
+                    if con.contact_collider[con.vertex_contact_list[j]] >= 0:
+                        bend = True
+            dtt = vertex_dt_bend[i] if bend else 1e30
             if gravity_norm > 0.0:
                 dtt = ti.min(dtt, ti.sqrt(vertex_typical_length[i] / gravity_norm))
             if ti.static(dynamic):

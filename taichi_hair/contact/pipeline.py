@@ -123,8 +123,11 @@ class ContactPipeline:
         self.max_radius = float(radius.max())
 
     def _bending_time(self, dynamic: bool) -> int:
-        """1 when W_z's dt~ takes the edge's bending time (``ContactConfig.weight_time``)."""
-        return int(self.config.weight_time == WeightTime.PAPER or not dynamic)
+        """Where W_z's dt~ takes the edge's bending time (``ContactConfig.weight_time``): 1 on every vertex in
+        contact, 0 on none, 2 on the vertices with a body contact only."""
+        if self.config.weight_time == WeightTime.PAPER or not dynamic:
+            return 1
+        return 2 if self.config.weight_time == WeightTime.HAIR_STEP else 0
 
     @property
     def contact_count(self) -> int:
