@@ -7,8 +7,9 @@ For each interior vertex i we approximately solve
 with a single Gauss-Newton step from y0 = (Bx)_i (where the frames are known),
 combined bending and stretching (each edge's stretch stiffness halved when it
 is shared by two pairs), and the strain-rate damping terms D_s, D_b of
-Brown et al. 2018 in the dynamic mode.  The 6x6 system is solved by LDL^T
-without pivoting in the working precision.
+Brown et al. 2018 in the dynamic mode.  The 6x6 system w I + (rank 5) is
+solved through a 5x5 one by the Woodbury identity (``strains.proximal_step5``),
+LDL^T without pivoting in the working precision.
 
 With the root-attachment rotation Q (Sec. 4.4 "Local frame") the dual lambda
 is stored in the strand's body frame; it is rotated to world coordinates here.
@@ -18,12 +19,11 @@ import taichi as ti
 
 from .admm import pair_weight
 from .strains import (
-    ldlt_factor6,
-    ldlt_substitute6,
-    mat36,
     pair_edge_jacobian,
     pair_kappa,
+    proximal_step5,
     stretch_strain,
+    vec5,
     vec6,
 )
 
@@ -103,50 +103,31 @@ def local_elasticity_at(
         ea, eb, kappa, J = pair_strain_at(i, measure, x, theta, es)
         s = vertex.vertex_strand[i]
         c = strand.strand_damping_time[s] * damping_scale
+        one_c = 1.0 + c
         k = buf.pair_bend_stiffness[i]
-        # Bending + bending damping (Gauss-Newton: J^T K J).
-        gk = k * ((kappa - buf.pair_rest_kappa[i]) + c * (kappa - buf.pair_kappa_begin[i]))
-        KJ = mat36(0.0)
-        for r in ti.static(range(3)):
-            for col in ti.static(range(6)):
-                KJ[r, col] = k[r] * J[r, col]
-        H = (1.0 + c) * (J.transpose() @ KJ)
-        g = J.transpose() @ gk
-        # Stretching of both edges (+ damping), stiffness halved on shared edges: rank-one terms
-        # (1 + c) k_s g g^T along each edge's strain gradient, kept out of the dense matrix (below).
+        # Stretch strains and gradients of both edges; stiffness halved on shared edges.
         eps_a, ga = stretch_strain(measure, ea, edge.edge_rest_length[a])
         eps_b, gb = stretch_strain(measure, eb, edge.edge_rest_length[i])
         ksa = buf.edge_pair_stretch_stiffness[a]
         ksb = buf.edge_pair_stretch_stiffness[i]
-        # Proximal term w/2 |y - (Bx - lambda)|^2 linearised at y0 = Bx.
+        # Proximal term w/2 |y - (Bx - lambda)|^2, linearised at y0 = Bx.
         w = pair_weight(vertex, buf, i, weight_floor)
         Q = dual_frame(use_q, strand, body_rotation, es, s, i)
         lam = dual_to_world(buf.pair_dual[i], Q)
-        for r in ti.static(range(6)):
-            H[r, r] += w
-        # Gauss-Newton step (A + U C U^T) delta = r0 - U C e~ / (1 + c), with A the bending + proximal
-        # matrix, U = [(g_a, 0), (0, g_b)], C = (1 + c) diag(k_a, k_b), e~ = eps + c (eps - eps^t), solved by
-        # the Woodbury identity: delta = A^-1 r0 - A^-1 U q, q = S^-1 (e~ / (1 + c) + U^T A^-1 r0),
-        # S = C^-1 + U^T A^-1 U.  Exact as the dense solve, but no k_s enters a sum with w or the bending
-        # terms: on a rod with E_s = 1000 E_b and w0 = 1 (k_s / w ~ 4e7, past single precision's 1.7e7)
-        # the dense LDL^T of the same matrix went non-finite; here the stiff stretch acts as a near
-        # constraint (S -> U^T A^-1 U as k_s -> infinity).
-        L, D = ldlt_factor6(H)
-        a0 = ldlt_substitute6(L, D, -g - w * lam)
-        ua = vec6(ga[0], ga[1], ga[2], 0.0, 0.0, 0.0)
-        ub = vec6(0.0, 0.0, 0.0, gb[0], gb[1], gb[2])
-        ba = ldlt_substitute6(L, D, ua)
-        bb = ldlt_substitute6(L, D, ub)
-        one_c = 1.0 + c
-        pa = (eps_a + c * (eps_a - buf.edge_strain_begin[a])) / one_c + ua.dot(a0)
-        pb = (eps_b + c * (eps_b - buf.edge_strain_begin[i])) / one_c + ub.dot(a0)
-        saa = 1.0 / (one_c * ksa) + ua.dot(ba)
-        sbb = 1.0 / (one_c * ksb) + ub.dot(bb)
-        sab = ua.dot(bb)
-        det = saa * sbb - sab * sab
-        qa = (sbb * pa - sab * pb) / det
-        qb = (saa * pb - sab * pa) / det
-        delta = a0 - qa * ba - qb * bb
+        # Gauss-Newton step: bending (J^T K J) and the two stretches (g g^T k_s), each with its strain-rate
+        # damping ((1 + c) times the stiffness, the strain offset by c (strain - strain at the step's
+        # beginning)), plus w I: (w I + V E V^T) delta = -w lam - V E f with V = [J^T | g_a | g_b],
+        # E = (1 + c) diag(k, k_sa, k_sb) and f the offsets divided by 1 + c (``proximal_step5``).
+        f = vec5(0.0)
+        wie = vec5(0.0)
+        for r in ti.static(range(3)):
+            f[r] = ((kappa[r] - buf.pair_rest_kappa[i][r]) + c * (kappa[r] - buf.pair_kappa_begin[i][r])) / one_c
+            wie[r] = ti.min(w / (one_c * k[r]), 1e30)  # a zero stiffness: 1e30, q_r ~ 0
+        f[3] = (eps_a + c * (eps_a - buf.edge_strain_begin[a])) / one_c
+        f[4] = (eps_b + c * (eps_b - buf.edge_strain_begin[i])) / one_c
+        wie[3] = ti.min(w / (one_c * ksa), 1e30)
+        wie[4] = ti.min(w / (one_c * ksb), 1e30)
+        delta = proximal_step5(J, ga, gb, wie, lam, f)
         # y = Bx + delta.  Fused dual update (Algorithm 1): lambda <- lambda + y - Bx = lambda + delta,
         # stored back in the frame Q; and the force the global step needs,
         # W_y (lambda + y - Bx) = W_y (lambda_old + 2 delta), in world coordinates.

@@ -36,7 +36,6 @@ vec3 = ti.math.vec3
 vec6 = ti.types.vector(6, float)
 mat3 = ti.math.mat3
 mat36 = ti.types.matrix(3, 6, float)
-mat6 = ti.types.matrix(6, 6, float)
 
 KORNER = 0
 BERGOU = 1
@@ -291,45 +290,77 @@ def stretch_energy(eps: float, stiffness: float) -> float:
     return 0.5 * stiffness * eps * eps
 
 
-# --------------------------------------------------------------------------- 6x6 LDL^T
+# --------------------------------------------------------------------------- the local step's rank-5 solve
+vec5 = ti.types.vector(5, float)
+mat5 = ti.types.matrix(5, 5, float)
+
+
 @ti.func
-def ldlt_factor6(H: mat6):
-    """LDL^T factors (L unit lower, D diagonal) of a symmetric positive definite 6x6 H, without pivoting."""
-    L = mat6(0.0)
-    D = vec6(0.0)
-    for j in ti.static(range(6)):
-        s = H[j, j]
+def proximal_step5(J: mat36, ga: vec3, gb: vec3, w_inv_e: vec5, lam: vec6, f: vec5) -> vec6:
+    """delta solving (w I + V E V^T) delta = -w lam - V E f, the Gauss-Newton step of the local problem
+    (Eq. 4) of one edge pair, with V = [J^T | (g_a, 0) | (0, g_b)] (6x5: the bending Jacobian's rows and the
+    two edges' stretch gradients) and E = diag(e) their stiffnesses; ``w_inv_e`` = w / e.
+
+    By the Woodbury identity, (w I + V E V^T)^-1 = (I - V P^-1 V^T) / w with P = w E^-1 + V^T V, and the
+    E f terms cancel: delta = -lam + V P^-1 (V^T lam - f).  P is 5x5, symmetric positive definite, with
+    P[3, 4] = g_a . 0 + 0 . g_b = 0; it is solved by LDL^T without pivoting.  No stiffness is multiplied
+    into a sum with w: a stiff stretch (e / w ~ 4e7, past single precision's 1.7e7) only makes its
+    w / e entry small, and the step tends to the constrained one (V^T delta = -f on those rows).  A zero
+    stiffness needs a large w / e (1e30), which leaves that row's multiplier ~0."""
+    P = mat5(0.0)
+    t = vec5(0.0)
+    for r in ti.static(range(3)):
+        for s in ti.static(range(r, 3)):
+            v = 0.0
+            for c in ti.static(range(6)):
+                v += J[r, c] * J[s, c]
+            P[r, s] = v
+            P[s, r] = v
+        pa = J[r, 0] * ga[0] + J[r, 1] * ga[1] + J[r, 2] * ga[2]
+        pb = J[r, 3] * gb[0] + J[r, 4] * gb[1] + J[r, 5] * gb[2]
+        P[r, 3] = pa
+        P[3, r] = pa
+        P[r, 4] = pb
+        P[4, r] = pb
+        v = -f[r]
+        for c in ti.static(range(6)):
+            v += J[r, c] * lam[c]
+        t[r] = v
+    P[3, 3] = ga.dot(ga)
+    P[4, 4] = gb.dot(gb)
+    t[3] = ga[0] * lam[0] + ga[1] * lam[1] + ga[2] * lam[2] - f[3]
+    t[4] = gb[0] * lam[3] + gb[1] * lam[4] + gb[2] * lam[5] - f[4]
+    for r in ti.static(range(5)):
+        P[r, r] += w_inv_e[r]
+    # LDL^T of P and the solve P q = t.
+    L = mat5(0.0)
+    D = vec5(0.0)
+    for j in ti.static(range(5)):
+        s = P[j, j]
         for k in ti.static(range(j)):
             s -= L[j, k] * L[j, k] * D[k]
         D[j] = s
-        for i in ti.static(range(j + 1, 6)):
-            t = H[i, j]
+        for i in ti.static(range(j + 1, 5)):
+            u = P[i, j]
             for k in ti.static(range(j)):
-                t -= L[i, k] * L[j, k] * D[k]
-            L[i, j] = t / s
-    return L, D
-
-
-@ti.func
-def ldlt_substitute6(L: mat6, D: vec6, b: vec6) -> vec6:
-    """x with L D L^T x = b, from the factors of :func:`ldlt_factor6`."""
-    y = vec6(0.0)
-    for i in ti.static(range(6)):
-        s = b[i]
+                u -= L[i, k] * L[j, k] * D[k]
+            L[i, j] = u / s
+    y = vec5(0.0)
+    for i in ti.static(range(5)):
+        s = t[i]
         for k in ti.static(range(i)):
             s -= L[i, k] * y[k]
         y[i] = s
-    x = vec6(0.0)
-    for i in ti.static(range(5, -1, -1)):
+    q = vec5(0.0)
+    for i in ti.static(range(4, -1, -1)):
         s = y[i] / D[i]
-        for k in ti.static(range(i + 1, 6)):
-            s -= L[k, i] * x[k]
-        x[i] = s
-    return x
-
-
-@ti.func
-def ldlt_solve6(H: mat6, b: vec6) -> vec6:
-    """Solve H x = b for symmetric positive definite H by LDL^T without pivoting (Sec. 4.4)."""
-    L, D = ldlt_factor6(H)
-    return ldlt_substitute6(L, D, b)
+        for k in ti.static(range(i + 1, 5)):
+            s -= L[k, i] * q[k]
+        q[i] = s
+    delta = -lam
+    for c in ti.static(range(6)):
+        delta[c] += J[0, c] * q[0] + J[1, c] * q[1] + J[2, c] * q[2]
+    for c in ti.static(range(3)):
+        delta[c] += ga[c] * q[3]
+        delta[c + 3] += gb[c] * q[4]
+    return delta

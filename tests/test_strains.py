@@ -51,45 +51,39 @@ def test_gauss_newton_hessian_is_exact_at_rest(fd_errors, measure):
     assert fd_errors[measure]["gauss_newton_hessian"] > 1e-6
 
 
-def test_ldlt_solve6_and_the_woodbury_stretch_step_match_a_dense_float64_solve():
-    """The local step's 6x6 solves against numpy's float64 solve, relative error < 1e-4 (f32): plain LDL^T of
-    a random SPD matrix, and the Woodbury form (A + U C U^T)^-1 r with C ~ 1e4 A (stiff stretch) as
-    elasticity.local_elasticity_at writes it: delta = A^-1 r - A^-1 U S^-1 U^T A^-1 r, S = C^-1 + U^T A^-1 U."""
+def test_the_local_steps_rank5_woodbury_solve_matches_a_dense_float64_solve():
+    """strains.proximal_step5 against numpy's float64 solve of the local step's 6x6 system
+    (w I + V E V^T) delta = -w lam - V E f, V = [J^T | (g_a, 0) | (0, g_b)]: relative error < 1e-4 (f32).
+    Three cases: stiffnesses of the order of w; a stiff stretch (E_s / w ~ 4e7, past single precision's
+    1.7e7, where a dense f32 LDL^T of the 6x6 matrix loses the bending part); and a zero twist stiffness."""
     import numpy as np
     import taichi as ti
 
-    from taichi_hair.strains import ldlt_factor6, ldlt_solve6, ldlt_substitute6
+    from taichi_hair.strains import mat36, proximal_step5, vec5, vec6
 
     rng = np.random.default_rng(5)
-    M = rng.normal(size=(6, 6))
-    A = M @ M.T + 6 * np.eye(6)
-    r = rng.normal(size=6)
-    U = np.zeros((6, 2))
-    U[:3, 0] = rng.normal(size=3)
-    U[3:, 1] = rng.normal(size=3)
-    C = np.diag([3e4, 5e4])
-    mat6 = ti.types.matrix(6, 6, float)
-    vec6 = ti.types.vector(6, float)
-    out = ti.Vector.field(6, float, 2)
+    out = ti.Vector.field(6, float, 3)
 
     @ti.kernel
-    def run(a: mat6, rhs: vec6, ua: vec6, ub: vec6, ka: float, kb: float):
-        out[0] = ldlt_solve6(a, rhs)
-        L, D = ldlt_factor6(a)
-        a0 = ldlt_substitute6(L, D, rhs)
-        ba = ldlt_substitute6(L, D, ua)
-        bb = ldlt_substitute6(L, D, ub)
-        saa = 1.0 / ka + ua.dot(ba)
-        sbb = 1.0 / kb + ub.dot(bb)
-        sab = ua.dot(bb)
-        pa = ua.dot(a0)
-        pb = ub.dot(a0)
-        det = saa * sbb - sab * sab
-        out[1] = a0 - ((sbb * pa - sab * pb) / det) * ba - ((saa * pb - sab * pa) / det) * bb
+    def run(k: ti.i32, J: mat36, ga: ti.math.vec3, gb: ti.math.vec3, wie: vec5, lam: vec6, f: vec5):
+        out[k] = proximal_step5(J, ga, gb, wie, lam, f)
 
-    run(mat6(A.tolist()), vec6(r.tolist()), vec6(U[:, 0].tolist()), vec6(U[:, 1].tolist()), C[0, 0], C[1, 1])
+    w = 2.0
+    cases = [np.array([3.0, 5.0, 1.0, 4.0, 2.0]), np.array([3.0, 5.0, 1.0, 8e7, 9e7]),
+             np.array([3.0, 5.0, 0.0, 4.0, 2.0])]
+    want = []
+    for k, e in enumerate(cases):
+        J = rng.normal(size=(3, 6))
+        ga, gb = rng.normal(size=3), rng.normal(size=3)
+        lam, f = rng.normal(size=6), 1e-3 * rng.normal(size=5)
+        V = np.zeros((6, 5))
+        V[:, :3] = J.T
+        V[:3, 3] = ga
+        V[3:, 4] = gb
+        want.append(np.linalg.solve(w * np.eye(6) + V @ np.diag(e) @ V.T, -w * lam - V @ (e * f)))
+        wie = np.minimum(w / np.maximum(e, 1e-300), 1e30)  # as local_elasticity_at writes it
+        run(k, mat36(J.tolist()), ti.math.vec3(ga.tolist()), ti.math.vec3(gb.tolist()), vec5(wie.tolist()),
+            vec6(lam.tolist()), vec5(f.tolist()))
     got = out.to_numpy().astype(np.float64)
-    dense = np.linalg.solve(A, r)
-    stiff = np.linalg.solve(A + U @ C @ U.T, r)
-    assert np.linalg.norm(got[0] - dense) < 1e-4 * np.linalg.norm(dense)
-    assert np.linalg.norm(got[1] - stiff) < 1e-4 * np.linalg.norm(stiff)
+    for k in range(3):
+        assert np.linalg.norm(got[k] - want[k]) < 1e-4 * np.linalg.norm(want[k]), k
