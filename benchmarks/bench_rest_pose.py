@@ -157,7 +157,7 @@ def main(argv=None) -> int:
     ap.add_argument("--friction", type=float, default=None, help="hair-hair friction instead of the scene's 0.2")
     ap.add_argument("--body-friction", type=float, default=None, help="the body collider's friction instead of the scene's")
     ap.add_argument("--weight-time", choices=("paper", "step", "hair-step"), default=None,
-                    help="ContactConfig.weight_time of the hair-hair and body contacts (default: the scene's, paper)")
+                    help="ContactConfig.weight_time of the hair-hair and body contacts (default: the scene's, hair-step)")
     ap.add_argument("--rest-poses", default="authored,sag-free", help="which runs: authored, sag-free or both")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
     args = ap.parse_args(argv)

@@ -318,23 +318,23 @@ class ContactConfig:
             statistics count the contacts that hold a rest overlap (``rest_overlap_contacts``), and their
             penetration is measured past the reduced thickness.  False: the paper's r_a + r_b for every
             pair [-].
-        weight_time: ``"paper"`` (default): dt~ = min(dt, sqrt(L~/|g|), bending time) in both modes, W_z of
-            the order of the bending weights.  ``"step"``: in the dynamic mode dt~ = min(dt, sqrt(L~/|g|)),
-            W_z of the order of the inertia m/dt^2 (Daviet 2020's scaling); the quasistatic mode, which has
-            no dt, keeps the paper's.  Measured 2026-12-05 (BENCHMARKS.md, issue 14): in the head turn
-            (sag-free wavy groom, hair-hair and head contacts, mid-turn) 10 iterations leave 4.5 % of a
-            substep's displacement with "step" against 12 % with "paper"
-            (``benchmarks/probes/head_turn_convergence.py``), and after a 40 degree turn the groom comes back
-            to 1.0 mm p90 instead of 8.6 mm; the hairball (300 strands, 12 frames) keeps its strain (p99
-            0.003 % against 0.008 %) and hair-pair penetration (p99 5.5 um either way).  But where a contact
-            must bend a strand against its stiffness the lighter weight converges too slowly: a strand
-            threaded through a 2 cm sphere's centre keeps 4 vertices 2.6-18 mm inside after 2 s with "step"
-            (none with "paper", ``tests/test_contacts.py``).  Hence not the default.  ``"hair-step"``:
-            "step" on a vertex whose contacts are all hair-hair, the paper's on a vertex with a body contact
-            (where a contact must push a strand against its stiffness): the threaded strand is pushed out as
-            with "paper".  After the 40 degree turn (same bench, 2026-12-05): straight 0.41, wavy 1.39,
-            curly 0.60 mm p90; the ponytail 8.2 mm and not at rest, bit-identical to "step" (its strands
-            never touch the head's spheres in that run, so every contact is hair-hair).
+        weight_time: ``"hair-step"`` (default): in the dynamic mode, dt~ = min(dt, sqrt(L~/|g|)) on a vertex
+            whose contacts are all hair-hair (W_z of the order of the inertia m/dt^2, Daviet 2020's scaling)
+            and the paper's dt~ = min(dt, sqrt(L~/|g|), bending time) on a vertex with a body contact; the
+            quasistatic mode, which has no dt, takes the paper's everywhere.  ``"paper"``: the paper's on
+            every vertex.  ``"step"``: the inertia's on every vertex (dynamic mode).  Measured 2026-12-05
+            (BENCHMARKS.md, issue 14, "The head turn's return"): in the head turn (sag-free wavy groom,
+            hair-hair and head contacts, mid-turn) 10 iterations leave 4.5 % of a substep's displacement with
+            the inertia's weight against 12 % with the paper's (``benchmarks/probes/head_turn_convergence.py``):
+            with the paper's, hair slides slowly, a numerical stiction.  After a 40 degree turn the wavy
+            groom ends 8.6 mm p90 from its authored shape with "paper", 1.39 mm with "hair-step", 1.00 mm
+            with "step", and 1.28 mm with "paper" at 40 iterations (the converged answer).  But where a
+            contact must bend a strand against its stiffness the lighter weight converges too slowly: a
+            strand threaded through a 2 cm sphere's centre keeps 4 vertices 2.6-18 mm inside after 2 s with
+            "step" (none with "paper" or "hair-step", ``tests/test_contacts.py``), hence the paper's weight
+            on body contacts.  The hairball (300 strands, 12 frames) keeps its quality with "hair-step":
+            strain p99 0.003 % (0.008 % with "paper"), hair-pair penetration p99 5.5 um either way, 0 crossed
+            pairs (4).
 
     Collision weights W_z = m / dt~^2 (``weight_time``).  The paper's
     dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) takes the bending time of one
@@ -370,7 +370,7 @@ class ContactConfig:
     late_body_contacts: bool = True
     rigid_reach: bool = False
     keep_rest_overlaps: bool = True
-    weight_time: WeightTime = WeightTime.PAPER
+    weight_time: WeightTime = WeightTime.HAIR_STEP
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):
