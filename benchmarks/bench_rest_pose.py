@@ -155,7 +155,8 @@ def main(argv=None) -> int:
     ap.add_argument("--air-viscosity", type=float, default=None,
                     help="[solver] air_viscosity xi [Pa s] instead of the scenes' 1e-4 (0: no air)")
     ap.add_argument("--friction", type=float, default=None, help="hair-hair friction instead of the scene's 0.2")
-    ap.add_argument("--body-friction", type=float, default=None, help="every collider's friction instead of the scene's (added where a collider table has none)")
+    ap.add_argument("--body-friction", type=float, default=None,
+                    help="every collider's friction instead of the scene's (added where a collider table has none)")
     ap.add_argument("--weight-time", choices=("paper", "step", "hair-step"), default=None,
                     help="ContactConfig.weight_time of the hair-hair and body contacts (default: the scene's, hair-step)")
     ap.add_argument("--rest-poses", default="authored,sag-free", help="which runs: authored, sag-free or both")
