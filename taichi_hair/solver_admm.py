@@ -225,9 +225,7 @@ class SolverADMM(SolverBase):
             # strands (20 strands, quasistatic, 200 steps: 17 cm; at w0 = 5: 0.2 mm; at 25: 1 um; rho up to
             # ~0.9): the weight of a prestressed pair is raised to PRESTRESS_WEIGHT * rho times its w0 = 1
             # weight.  Measured over 600 steps (largest drift from x*): 25 -> 24 um at 200 steps, 100 -> 22 um
-            # (still growing), 400 -> 2.8 um (w0 = 25 everywhere: 2.1 um).  Under a head turn sag-free strands
-            # do not come back (BENCHMARKS, sag-free rest pose; at 100 as at 400); the prestress term in the
-            # local step's Hessian (Newton instead of Gauss-Newton) is the next thing to try, not a larger weight.
+            # (still growing), 400 -> 2.8 um (w0 = 25 everywhere: 2.1 um).
             # Quasistatic mode only (2026-12-05): in the dynamic mode the inertia m/dt^2 in the global step keeps
             # the iteration at the equilibrium without it (wavy groom on the head, still, 2 s: p90 0.004 mm), and
             # the raised weight cost the convergence of every step: in the head turn 10 iterations left 23 % of a

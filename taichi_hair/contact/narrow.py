@@ -242,6 +242,11 @@ def write_late_body_contacts(vertex: ti.template(), x: ti.template(), radius: ti
 #: ``_delassus``'s third choice (after True: by batch, False: by vertex): no mass splitting (n_i = 1).
 SPLIT_NONE = 2
 
+#: ``build_adjacency``'s ``bending_time``: where W_z's dt~ takes the edge's bending time (ContactConfig.weight_time):
+#: on no vertex ("step", dynamic mode), on every vertex ("paper", or the quasistatic mode), or on the vertices
+#: with a body contact only ("hair-step", dynamic mode).
+BEND_NONE, BEND_ALL, BEND_BODY = 0, 1, 2
+
 
 @ti.func
 def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> float:
@@ -392,15 +397,15 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             while e < end and con.vertex_contact_list[e] % BATCHES < b:
                 e += 1
             con.vertex_batch_start[i, b] = e
-        # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5); with
-        # ``bending_time`` 0 (ContactConfig.weight_time "step", dynamic mode) the bending time is left out,
-        # with 2 ("hair-step") it is left out on a vertex whose contacts are all hair-hair.
+        # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5), the bending
+        # time left out where ``bending_time`` says (BEND_NONE: everywhere, BEND_BODY: on a vertex whose
+        # contacts are all hair-hair).
         # Kinematic (clamped) vertices do not move (1/W_z = 0) but still count in D_hat with the weight a
         # free vertex would have: see ``_delassus``.
         inv_w = 0.0
         if con.vertex_contact_count[i] > 0:
-            bend = bending_time == 1
-            if bending_time == 2:
+            bend = bending_time == BEND_ALL
+            if bending_time == BEND_BODY:
                 for j in range(beg, end):
                     if con.contact_collider[con.vertex_contact_list[j]] >= 0:
                         bend = True

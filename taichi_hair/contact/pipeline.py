@@ -11,7 +11,8 @@ import taichi as ti
 from ..config import CorrectionEdgeOrder, CorrectionLengths, MassSplitting, WeightTime
 from ..solver_base import on_gpu
 
-from .narrow import SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts, write_contacts
+from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts,
+                     write_contacts)
 
 #: Edge-length passes that end the length-holding correction (``ContactPipeline.correct``), before each
 #: depth check.  8, not 4: measured (24 frames of assets/scenes/head_turn.toml) strain p99 / max 0.042 / 0.29 %
@@ -123,11 +124,10 @@ class ContactPipeline:
         self.max_radius = float(radius.max())
 
     def _bending_time(self, dynamic: bool) -> int:
-        """Where W_z's dt~ takes the edge's bending time (``ContactConfig.weight_time``): 1 on every vertex in
-        contact, 0 on none, 2 on the vertices with a body contact only."""
+        """Where W_z's dt~ takes the edge's bending time (``ContactConfig.weight_time``; ``narrow.BEND_*``)."""
         if self.config.weight_time == WeightTime.PAPER or not dynamic:
-            return 1
-        return 2 if self.config.weight_time == WeightTime.HAIR_STEP else 0
+            return BEND_ALL
+        return BEND_BODY if self.config.weight_time == WeightTime.HAIR_STEP else BEND_NONE
 
     @property
     def contact_count(self) -> int:
