@@ -328,7 +328,7 @@ class ContactConfig:
             the inertia's weight against 12 % with the paper's (``benchmarks/probes/head_turn_convergence.py``):
             with the paper's, hair slides slowly, a numerical stiction.  After a 40 degree turn the wavy
             groom ends 8.6 mm p90 from its authored shape with "paper", 1.39 mm with "hair-step", 1.00 mm
-            with "step", and 1.28 mm with "paper" at 40 iterations (the converged answer).  But where a
+            with "step", and 1.28 mm with "paper" at 40 iterations (nearer convergence: 5.5 % of a step left).  But where a
             contact must bend a strand against its stiffness the lighter weight converges too slowly: a
             strand threaded through a 2 cm sphere's centre keeps 4 vertices 2.6-18 mm inside after 2 s with
             "step" (none with "paper" or "hair-step", ``tests/test_contacts.py``), hence the paper's weight
