@@ -385,6 +385,28 @@ class GridFields:
         self.max_speed = ti.field(float, ())
 
 
+class PairFields:
+    """Hair-hair pairs within reach, each found once (``contact.pairs.find_candidates``), and per edge the pairs it
+    is in (CSR), from which each edge keeps its closest (``GridFields.edge_candidate``).
+
+    ``capacity`` pairs; the search grows it when a step finds more.
+    """
+
+    def __init__(self, vertex_count: int, capacity: int):
+        n = vertex_count
+        self.capacity = capacity
+        #: The two edges of each pair, lower first [-], shape (capacity, 2); their distance [m], shape (capacity,).
+        self.pair_edge = ti.Vector.field(2, ti.i32, capacity)
+        self.pair_distance = ti.field(float, capacity)
+        #: Pairs found by the last search (may exceed the capacity: then it grows and searches again) [-].
+        self.pair_count = ti.field(ti.i32, ())
+        #: Per edge: the start of its pairs in ``edge_pair_list``, then the total [-], shape (vertex_count + 1,);
+        #: a fill cursor, shape (vertex_count,); pair indices by edge, shape (2 capacity,).
+        self.edge_pair_start = ti.field(ti.i32, n + 1)
+        self.edge_pair_fill = ti.field(ti.i32, n)
+        self.edge_pair_list = ti.field(ti.i32, 2 * capacity)
+
+
 class CCDFields:
     """Continuous-time detection (Sec. 4.5, ACCD): per-edge earliest impacts.
 

@@ -1,4 +1,4 @@
-"""Where the hair-hair broad phase spends its time: ``contact.grid.find_candidates`` taken apart on a dense pile.
+"""Where the hair-hair broad phase spends its time: the candidate search taken apart on a dense pile.
 
 Run from the repository root: ``python3 benchmarks/probes/find_candidates_split.py [STRANDS] [FRAMES]`` (default
 1000 strands, 10 frames: the hairball just after its impact).  The hairball is simulated to FRAMES, then four
@@ -10,8 +10,10 @@ differences give the cost of each part (same machine, same state, best of 3):
 2. + the pair's reach (relative velocity) and the 18-DOP test;
 3. + the closest points of the two segments;
 
-and ``find_candidates`` itself (+ the sorted insertion of the K closest).  It also prints the average count of
-overlapping boxes and of DOP survivors per edge.  A diagnostic, not a benchmark.
+then the search as it was until 2026-12-05, each pair tested from both sides (``find_candidates_both_sides``: the
+loop + the sorted insertion of the K closest), against the library's ``contact.pairs.find_candidates`` (each pair
+tested once, from its lower edge, then gathered per edge), in the same run, and whether the two keep the same
+lists.  It also prints the average count of overlapping boxes and of DOP survivors per edge.  A diagnostic.
 """
 
 import sys
@@ -20,14 +22,52 @@ import time
 import numpy as np
 import taichi as ti
 
-from taichi_hair.contact.grid import bucket_of, cell_in_range, dops_overlap, entry_pair_here, segment_closest_points
+from taichi_hair.contact.grid import (bucket_of, cell_in_range, dops_overlap, edges_adjacent, edges_kinematic,
+                                     entry_pair_here, insert_candidate, segment_closest_points)
+
+
+@ti.kernel
+def find_candidates_both_sides(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
+                               grid: ti.template(), boxes: ti.template(), h: float, margin: float, sweep: float,
+                               fall: float):
+    """The search before ``contact.pairs``: every edge tests every edge it meets (each pair twice, once per
+    side) and keeps its K closest by sorted insertion."""
+    t = boxes.table_size
+    K = ti.static(grid.candidates_per_edge)
+    for a in grid.edge_candidate_count:
+        count = 0
+        if edge.edge_rest_length[a] > 0.0:
+            ca = grid.edge_dop_center[a]
+            ea = grid.edge_dop_extent[a]
+            ra = radius[a]
+            sa = vertex.vertex_strand[a]
+            va = grid.edge_velocity[a]
+            sa_spread = grid.edge_velocity_spread[a]
+            lo = boxes.edge_cell_lo[a]
+            box_lo_a = boxes.edge_box_lo[a]
+            box_hi_a = boxes.edge_box_hi[a]
+            span = boxes.edge_cell_hi[a] - lo + 1
+            for k in range(span[0] * span[1] * span[2]):
+                cell = cell_in_range(lo, k, span)
+                bkt = bucket_of(cell, t)
+                for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
+                    if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
+                        b = boxes.entry_edge[e]
+                        if b != a and not edges_adjacent(vertex, a, b, sa):
+                            rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
+                            reach = ra + radius[b] + margin + sweep * rel + fall
+                            if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
+                                s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+                                if dist < reach and not edges_kinematic(vertex, a, b):
+                                    count = insert_candidate(grid, a, b, dist, count, K)
+        grid.edge_candidate_count[a] = count
 
 
 @ti.kernel
 def query_part(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
                grid: ti.template(), boxes: ti.template(), h: float, margin: float, sweep: float, fall: float,
                level: ti.template(), out: ti.template()):
-    """The loop of ``find_candidates`` up to part ``level`` (module docstring); per edge, a sum into ``out`` so
+    """The loop of ``find_candidates_both_sides`` up to part ``level`` (module docstring); per edge, a sum into ``out`` so
     the compiler keeps the work."""
     t = boxes.table_size
     for a in grid.edge_candidate_count:
@@ -75,7 +115,7 @@ def main(argv=None) -> int:
     from taichi_hair import SolverADMM, SolverADMMConfig
     from taichi_hair.config import ContactConfig
     from taichi_hair.contact.colliders import SphereCollider
-    from taichi_hair.contact.grid import find_candidates
+    from taichi_hair.contact.pairs import find_candidates
     from taichi_hair.scene.builtin import HairballScene, build_hairball, hairball_rotation
 
     scene = HairballScene(strands=strands, length=0.3)
@@ -126,8 +166,24 @@ def main(argv=None) -> int:
                  2: f"DOP survivors per edge {per:.1f}", 3: ""}[level]
         print(f"  {level}. {names[level]:48s} {ms:8.1f} ms  (+{ms - prev:6.1f})  {extra}")
         prev = ms
-    ms = best(lambda: find_candidates(*args))
-    print(f"  find_candidates (+ sorted insertion of the K closest)   {ms:8.1f} ms  (+{ms - prev:6.1f})")
+    ms = best(lambda: find_candidates_both_sides(*args))
+    print(f"  both sides (+ sorted insertion of the K closest)        {ms:8.1f} ms  (+{ms - prev:6.1f})")
+
+    def lists():
+        cnt, cand = g.edge_candidate_count.to_numpy(), g.edge_candidate.to_numpy()
+        return [frozenset(cand[a, :cnt[a]].tolist()) for a in range(cnt.size)]
+
+    before = lists()
+    state = {"pairs": pipe.pairs}
+
+    def once():
+        state["pairs"] = find_candidates(*args[:6], state["pairs"], *args[6:])[0]
+
+    ms_once = best(once)
+    after = lists()
+    differ = sum(1 for u, w in zip(before, after) if u != w)
+    print(f"  each pair once (contact.pairs.find_candidates)          {ms_once:8.1f} ms  ({ms / ms_once:.2f}x faster than "
+          f"both sides); {int(state['pairs'].pair_count[None])} pairs; edges whose lists differ: {differ}")
     return 0
 
 

@@ -10,12 +10,13 @@
 3. ``count_cells`` / ``fill_entries``: a multi-insert spatial hash with cells
    of the longest edge (the paper's size): each edge is entered in every cell
    its box overlaps, and the entries are counting-sorted by bucket.
-4. ``find_candidates``: each edge visits its own cells only; a pair is tested
-   once per side, in the first cell both boxes share; boxes, then DOPs cull;
-   the closest points of the two segments decide; each edge keeps the
+4. ``pairs.find_candidates``: each edge visits its own cells only and tests
+   the edges of higher index it meets, in the first cell both boxes share;
+   boxes, then DOPs cull; the closest points of the two segments decide; each
+   pair within reach is found once, and each edge keeps the
    ``candidates_per_edge`` (6 in the paper) closest colliding edges, sorted by
    (distance, index) so the result does not depend on the order of the bucket
-   fill (which uses atomics): detection is deterministic.
+   fill or the pair list (which use atomics): detection is deterministic.
 
 Departure from the paper, written down: the paper's grid is a sparse hash
 grid with one dense subdivision level inside each occupied cell; we use one
@@ -208,7 +209,7 @@ def compute_edge_bounds(edge: ti.template(), x: ti.template(), v: ti.template(),
     edge speed |v_e| + spread [m/s] (atomic max: deterministic).  The velocities are taken relative to the
     rigid field v0 + omega x (x - c) (zero: the world's; ``ContactConfig.rigid_reach``): a rigid motion does
     not change the distance of two points (d/dt |p_a - p_b| gets nothing from omega x (p_a - p_b), which is
-    normal to p_a - p_b), so the reach of ``find_candidates`` holds for the relative velocities as well."""
+    normal to p_a - p_b), so the reach of ``pairs.find_pairs`` holds for the relative velocities as well."""
     grid.max_edge_length[None] = 0.0
     grid.max_speed[None] = 0.0
     for i in x:
@@ -230,7 +231,7 @@ def compute_edge_bounds(edge: ti.template(), x: ti.template(), v: ti.template(),
 def proximity_boxes(edge: ti.template(), x: ti.template(), radius: ti.template(), grid: ti.template(),
                     boxes: ti.template(), margin: float, sweep: float, fall: float):
     """Box of each real edge grown by r + margin/2 + sweep (|v_e| + spread) + fall/2 [m]: two edges whose
-    distance is below their reach (``find_candidates``) have overlapping boxes."""
+    distance is below their reach (``pairs.find_pairs``) have overlapping boxes."""
     for i in x:
         if edge.edge_rest_length[i] > 0.0:
             grow = radius[i] + 0.5 * margin + sweep * (grid.edge_velocity[i].norm() + grid.edge_velocity_spread[i]) \
@@ -249,7 +250,7 @@ def strand_boxes(strand: ti.template(), edge: ti.template(), x: ti.template(), r
     It cannot when every edge tangent t_k makes an acute angle with the chord direction d
     (c = min_k t_k . d > 0): along d the strand then advances monotonically, so two non-adjacent edges
     are at least L_min c apart, and when that exceeds the largest reach of two of its edges in
-    ``find_candidates``, bounded by 2 r_max + margin + sweep (2 max_e |v_e - v_mean| + 2 max spread) + fall
+    ``pairs.find_pairs``, bounded by 2 r_max + margin + sweep (2 max_e |v_e - v_mean| + 2 max spread) + fall
     (edges of one strand moving together need little reach), no such pair is a candidate.
     """
     for s in strand.strand_vertex_start:
@@ -383,54 +384,8 @@ def edges_kinematic(vertex: ti.template(), a: ti.i32, b: ti.i32) -> bool:
         vertex.vertex_is_fixed[b] != 0 and vertex.vertex_is_fixed[b + 1] != 0
 
 
-@ti.kernel
-def find_candidates(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
-                    grid: ti.template(), boxes: ti.template(), h: float, margin: float, sweep: float, fall: float):
-    """Keep, per edge, the closest colliding edges, at most K, sorted by (distance, index).
-
-    Two edges collide when their distance is below their reach
-    r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) + fall, with v the
-    edges' mean velocities, s their spreads, sweep = velocity_margin dt and
-    fall = velocity_margin |g| dt^2 (one edge may be supported while the other
-    falls): a bound on how much closer they can get during the step, from
-    their *relative* motion (hair moving together needs little margin).
-
-    Edges of the same strand that share a vertex, and pairs of kinematic edges (:func:`edges_kinematic`),
-    are skipped.
-    """
-    t = boxes.table_size
-    K = ti.static(grid.candidates_per_edge)
-    for a in grid.edge_candidate_count:
-        count = 0
-        if edge.edge_rest_length[a] > 0.0:
-            ca = grid.edge_dop_center[a]
-            ea = grid.edge_dop_extent[a]
-            ra = radius[a]
-            sa = vertex.vertex_strand[a]
-            va = grid.edge_velocity[a]
-            sa_spread = grid.edge_velocity_spread[a]
-            lo = boxes.edge_cell_lo[a]
-            box_lo_a = boxes.edge_box_lo[a]
-            box_hi_a = boxes.edge_box_hi[a]
-            span = boxes.edge_cell_hi[a] - lo + 1
-            for k in range(span[0] * span[1] * span[2]):
-                cell = cell_in_range(lo, k, span)
-                bkt = bucket_of(cell, t)
-                for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
-                    if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
-                        b = boxes.entry_edge[e]
-                        if b != a and not edges_adjacent(vertex, a, b, sa):
-                            rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
-                            reach = ra + radius[b] + margin + sweep * rel + fall
-                            if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
-                                s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-                                if dist < reach and not edges_kinematic(vertex, a, b):
-                                    count = _insert_candidate(grid, a, b, dist, count, K)
-        grid.edge_candidate_count[a] = count
-
-
 @ti.func
-def _insert_candidate(grid: ti.template(), a: ti.i32, b: ti.i32, dist: float, count: ti.i32, K: ti.template()) -> ti.i32:
+def insert_candidate(grid: ti.template(), a: ti.i32, b: ti.i32, dist: float, count: ti.i32, K: ti.template()) -> ti.i32:
     """Sorted insertion of (dist, b) into edge a's list of at most K; returns the new count."""
     dup = False
     for k in range(count):

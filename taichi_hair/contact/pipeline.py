@@ -40,7 +40,7 @@ class ContactPipeline:
 
     def __init__(self, model, config, colliders=None):
         from .colliders import ColliderSet
-        from ..fields import BoxGridFields, CCDFields, ContactFields, GridFields, StrandBoxFields
+        from ..fields import BoxGridFields, CCDFields, ContactFields, GridFields, PairFields, StrandBoxFields
 
         self.model = model
         self.config = config
@@ -64,6 +64,8 @@ class ContactPipeline:
         while table < 2 * n:
             table *= 2
         self.grid = GridFields(n, config.max_contacts_per_edge)
+        #: Hair-hair pairs within reach, each found once (``pairs.find_candidates``; grows when a step finds more).
+        self.pairs = PairFields(n, max(1 << 12, 3 * n))
         #: Multi-insert hash of edge boxes, shared by proximity and continuous detection.
         self.boxes = BoxGridFields(n, table, max(12 * n, 1 << 14))
         capacity = max(16, int(config.capacity_per_vertex * n))
@@ -140,8 +142,8 @@ class ContactPipeline:
         import numpy as np
 
         from ..fields import ContactFields
-        from .grid import (compute_edge_bounds, find_candidates, proximity_boxes, rigid_velocity_fit,
-                           strand_velocity_moments)
+        from .grid import compute_edge_bounds, proximity_boxes, rigid_velocity_fit, strand_velocity_moments
+        from .pairs import find_candidates
 
         m, cfg, g = self.model, self.config, self.grid
         x, v = state.vertex_position, state.vertex_velocity
@@ -155,7 +157,7 @@ class ContactPipeline:
         max_edge = float(g.max_edge_length[None])
         speed = float(g.max_speed[None])
         # Reach of the step (dynamic mode): two edges may approach by their relative displacement,
-        # bounded by velocity_margin dt (|v_a - v_b| + spreads) (grid.find_candidates); a vertex may
+        # bounded by velocity_margin dt (|v_a - v_b| + spreads) (pairs.find_pairs); a vertex may
         # approach a body by velocity_margin (|v| dt + |g| dt^2).  Proximity detection runs once per step.
         gn = float(np.linalg.norm(np.asarray(gravity, float)))
         sweep = cfg.velocity_margin * dt if dynamic else 0.0
@@ -185,7 +187,9 @@ class ContactPipeline:
                 self.hair_search_skip_count += 1
             else:
                 h = self._fill_box_grid(max(max_edge, 1e-9))
-                find_candidates(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes, h, margin, sweep, fall)
+                self.pairs, grown = find_candidates(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes, self.pairs, h,
+                                                    margin, sweep, fall)
+                self.grow_events += int(grown)
         else:
             g.edge_candidate_count.fill(0)
         sweep, fall = body_sweep, body_fall
