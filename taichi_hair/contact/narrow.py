@@ -388,13 +388,18 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
         for j in range(beg + 1, end):
             key = con.vertex_contact_list[j]
             k = j - 1
-            while k >= beg and _batch_order_after(con.vertex_contact_list[k], key):
+            # (A break, not ``k >= beg and ...``: Taichi's ``and`` evaluates both sides, which read entry beg - 1.)
+            while k >= beg:
+                if not _batch_order_after(con.vertex_contact_list[k], key):
+                    break
                 con.vertex_contact_list[k + 1] = con.vertex_contact_list[k]
                 k -= 1
             con.vertex_contact_list[k + 1] = key
         e = beg
         for b in ti.static(range(BATCHES)):
-            while e < end and con.vertex_contact_list[e] % BATCHES < b:
+            while e < end:
+                if con.vertex_contact_list[e] % BATCHES >= b:
+                    break
                 e += 1
             con.vertex_batch_start[i, b] = e
         # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5), the bending
