@@ -176,7 +176,10 @@ def find_impacts(vertex: ti.template(), edge: ti.template(), x0: ti.template(), 
                 for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
                     if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
                         b = boxes.entry_edge[e]
-                        if b != a and not edges_adjacent(vertex, a, b, sa) and not is_contact_pair(con, a, b):
+                        if b == a or edges_adjacent(vertex, a, b, sa):
+                            continue
+                        # A branch of its own: Taichi's ``and`` evaluates both sides, and this scans a's contacts.
+                        if not is_contact_pair(con, a, b):
                             # Evaluate in a fixed order so both edges of a pair get the same time.
                             p = ti.min(a, b)
                             q = ti.max(a, b)
