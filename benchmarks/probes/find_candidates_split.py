@@ -10,8 +10,8 @@ differences give the cost of each part (same machine, same state, best of 3):
 2. + the pair's reach (relative velocity) and the 18-DOP test;
 3. + the closest points of the two segments;
 
-then the search as it was until 2026-12-05, each pair tested from both sides (``find_candidates_both_sides``: the
-loop + the sorted insertion of the K closest), against the library's ``contact.pairs.find_candidates`` (each pair
+then the search as it was until 2026-12-05, each pair tested from both sides (level 4: the loop + the sorted
+insertion of the K closest), against the library's ``contact.pairs.find_candidates`` (each pair
 tested once, from its lower edge, then gathered per edge), in the same run, and whether the two keep the same
 lists.  It also prints the average count of overlapping boxes and of DOP survivors per edge.  A diagnostic.
 """
@@ -27,51 +27,17 @@ from taichi_hair.contact.grid import (bucket_of, cell_in_range, dops_overlap, ed
 
 
 @ti.kernel
-def find_candidates_both_sides(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
-                               grid: ti.template(), boxes: ti.template(), h: float, margin: float, sweep: float,
-                               fall: float):
-    """The search before ``contact.pairs``: every edge tests every edge it meets (each pair twice, once per
-    side) and keeps its K closest by sorted insertion."""
-    t = boxes.table_size
-    K = ti.static(grid.candidates_per_edge)
-    for a in grid.edge_candidate_count:
-        count = 0
-        if edge.edge_rest_length[a] > 0.0:
-            ca = grid.edge_dop_center[a]
-            ea = grid.edge_dop_extent[a]
-            ra = radius[a]
-            sa = vertex.vertex_strand[a]
-            va = grid.edge_velocity[a]
-            sa_spread = grid.edge_velocity_spread[a]
-            lo = boxes.edge_cell_lo[a]
-            box_lo_a = boxes.edge_box_lo[a]
-            box_hi_a = boxes.edge_box_hi[a]
-            span = boxes.edge_cell_hi[a] - lo + 1
-            for k in range(span[0] * span[1] * span[2]):
-                cell = cell_in_range(lo, k, span)
-                bkt = bucket_of(cell, t)
-                for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
-                    if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
-                        b = boxes.entry_edge[e]
-                        if b != a and not edges_adjacent(vertex, a, b, sa):
-                            rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
-                            reach = ra + radius[b] + margin + sweep * rel + fall
-                            if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
-                                s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-                                if dist < reach and not edges_kinematic(vertex, a, b):
-                                    count = insert_candidate(grid, a, b, dist, count, K)
-        grid.edge_candidate_count[a] = count
-
-
-@ti.kernel
 def query_part(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
                grid: ti.template(), boxes: ti.template(), h: float, margin: float, sweep: float, fall: float,
                level: ti.template(), out: ti.template()):
-    """The loop of ``find_candidates_both_sides`` up to part ``level`` (module docstring); per edge, a sum into ``out`` so
-    the compiler keeps the work."""
+    """The search from both sides of each pair (the library's until 2026-12-05) up to part ``level`` (module
+    docstring); per edge, a sum into ``out`` so the compiler keeps the work.  Level 4 is the whole search: it
+    keeps each edge's K closest by sorted insertion into ``grid.edge_candidate``."""
     t = boxes.table_size
+    K = ti.static(grid.candidates_per_edge)
     for a in grid.edge_candidate_count:
         acc = 0.0
+        count = 0
         if edge.edge_rest_length[a] > 0.0:
             ca = grid.edge_dop_center[a]
             ea = grid.edge_dop_extent[a]
@@ -94,7 +60,7 @@ def query_part(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                             b = boxes.entry_edge[e]
                             if ti.static(level == 1):
                                 acc += 1.0
-                            elif b != a and not (vertex.vertex_strand[b] == sa and ti.abs(b - a) <= 1):
+                            elif b != a and not edges_adjacent(vertex, a, b, sa):
                                 rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
                                 reach = ra + radius[b] + margin + sweep * rel + fall
                                 if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
@@ -103,8 +69,13 @@ def query_part(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                                     else:
                                         s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
                                         if dist < reach:
-                                            acc += dist
+                                            if ti.static(level == 3):
+                                                acc += dist
+                                            elif not edges_kinematic(vertex, a, b):
+                                                count = insert_candidate(grid, a, b, dist, count, K)
         out[a] = acc
+        if ti.static(level == 4):
+            grid.edge_candidate_count[a] = count
 
 
 def main(argv=None) -> int:
@@ -166,7 +137,7 @@ def main(argv=None) -> int:
                  2: f"DOP survivors per edge {per:.1f}", 3: ""}[level]
         print(f"  {level}. {names[level]:48s} {ms:8.1f} ms  (+{ms - prev:6.1f})  {extra}")
         prev = ms
-    ms = best(lambda: find_candidates_both_sides(*args))
+    ms = best(lambda: query_part(*args, 4, out))
     print(f"  both sides (+ sorted insertion of the K closest)        {ms:8.1f} ms  (+{ms - prev:6.1f})")
 
     def lists():
