@@ -389,7 +389,9 @@ class PairFields:
     """Hair-hair pairs within reach, each found once (``contact.pairs.find_candidates``), and per edge the pairs it
     is in (CSR), from which each edge keeps its closest (``GridFields.edge_candidate``).
 
-    ``capacity`` pairs; the search grows it when a step finds more.
+    ``capacity`` pairs; the search grows it when a step finds more (counted in ``ContactPipeline.grow_events``;
+    the two search kernels compile again for the new fields, once per growth: the 1,000-strand hairball's
+    pile needs ~36 pairs per edge, the initial capacity holds 3).
     """
 
     def __init__(self, vertex_count: int, capacity: int):

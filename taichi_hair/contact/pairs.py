@@ -8,7 +8,7 @@ with its distance (``find_pairs``).  Then every edge gathers the pairs it is in 
 search from both sides of every pair keeps, with half the pair tests (the search before this module tested
 each pair twice, once from each side).  Measured on the 1,000-strand hairball's pile after its impact
 (``benchmarks/probes/find_candidates_split.py``, which keeps the search from both sides for the comparison):
-262-302 ms against 565-594 ms, the same lists on every edge.  The test ``b <= a`` is a branch of its own:
+262-302 ms against 565-601 ms, the same lists on every edge.  The test ``b <= a`` is a branch of its own:
 Taichi's ``and`` does not short-circuit, and with ``b > a and entry_pair_here(...)`` the entry test ran on
 every entry (375 ms).
 
@@ -43,10 +43,12 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                grid: ti.template(), boxes: ti.template(), pairs: ti.template(), h: float, margin: float,
                sweep: float, fall: float):
     """Append every pair (a, b), a < b, whose distance is below its reach
-    r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) + fall (``grid.find_candidates``' rule: v the edges'
-    mean velocities, s their spreads); ``pair_count`` gets the number found, which may exceed the capacity
-    (the pairs past it are not stored).  Edges of one strand that share a vertex, and pairs of kinematic
-    edges, are skipped."""
+    r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) + fall, with v the edges' mean velocities, s their
+    spreads, sweep = velocity_margin dt and fall = velocity_margin |g| dt^2 (one edge may be supported while
+    the other falls): a bound on how much closer they can get during the step, from their *relative* motion
+    (hair moving together needs little margin).  ``pair_count`` gets the number found, which may exceed the
+    capacity (the pairs past it are not stored).  Edges of one strand that share a vertex, and pairs of
+    kinematic edges (``grid.edges_kinematic``), are skipped."""
     pairs.pair_count[None] = 0
     t = boxes.table_size
     for a in grid.edge_candidate_count:
