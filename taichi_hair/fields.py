@@ -387,7 +387,7 @@ class GridFields:
 
 class PairFields:
     """Hair-hair pairs within reach, each found once (``contact.pairs.find_candidates``), and per edge the pairs it
-    is in (CSR), from which each edge keeps its closest (``GridFields.edge_candidate``).
+    is the higher edge of (CSR), which it adds to its closest (``GridFields.edge_candidate``).
 
     ``capacity`` pairs; the search grows it when a step finds more (counted in ``ContactPipeline.grow_events``;
     the two search kernels compile again for the new fields, once per growth: the 1,000-strand hairball's
@@ -402,11 +402,12 @@ class PairFields:
         self.pair_distance = ti.field(float, capacity)
         #: Pairs found by the last search (may exceed the capacity: then it grows and searches again) [-].
         self.pair_count = ti.field(ti.i32, ())
-        #: Per edge: the start of its pairs in ``edge_pair_list``, then the total [-], shape (vertex_count + 1,);
-        #: a fill cursor, shape (vertex_count,); pair indices by edge, shape (2 capacity,).
+        #: Per edge: the start in ``edge_pair_list`` of the pairs it is the higher edge of, then the total [-],
+        #: shape (vertex_count + 1,); a fill cursor, shape (vertex_count,); pair indices by higher edge, shape
+        #: (capacity,).
         self.edge_pair_start = ti.field(ti.i32, n + 1)
         self.edge_pair_fill = ti.field(ti.i32, n)
-        self.edge_pair_list = ti.field(ti.i32, 2 * capacity)
+        self.edge_pair_list = ti.field(ti.i32, capacity)
 
 
 class CCDFields:

@@ -2,15 +2,15 @@
 
 Each edge walks the cells its box overlaps (``grid.count_cells`` / ``fill_entries``) and tests only the edges
 of higher index that it meets there, in the first cell both boxes share: boxes, then the pair's reach and the
-18-DOPs, then the closest points of the two segments.  A pair within reach is appended once, lower edge first,
-with its distance (``find_pairs``).  Then every edge gathers the pairs it is in and keeps the
-``candidates_per_edge`` closest, sorted by (distance, other edge) (``gather_candidates``): the same lists a
-search from both sides of every pair keeps, with half the pair tests (the search before this module tested
-each pair twice, once from each side).  Measured on the 1,000-strand hairball's pile after its impact
-(``benchmarks/probes/find_candidates_split.py``, which keeps the search from both sides for the comparison):
-262-302 ms against 565-601 ms, the same lists on every edge.  The test ``b <= a`` is a branch of its own:
-Taichi's ``and`` does not short-circuit, and with ``b > a and entry_pair_here(...)`` the entry test ran on
-every entry (375 ms).
+18-DOPs, then the closest points of the two segments. A pair within reach is appended once, lower edge first,
+with its distance, and the lower edge keeps it in its own list of the ``candidates_per_edge`` closest, sorted
+by (distance, other edge) (``find_pairs``). Then every edge adds the pairs its lower partners found
+(``gather_candidates``): the same lists a search from both sides of every pair keeps, with half the pair tests
+(the search before this module tested each pair twice, once from each side). Measured on the 1,000-strand
+hairball's pile after its impact (``benchmarks/probes/find_candidates_split.py``, which keeps the search from
+both sides for the comparison): 262-302 ms against 565-601 ms, the same lists on every edge. The test
+``b <= a`` is a branch of its own: Taichi's ``and`` does not short-circuit, and with
+``b > a and entry_pair_here(...)`` the entry test ran on every entry (375 ms).
 
 Deterministic: the pairs are appended in any order (atomics), but each edge's list is ordered by
 (distance, index) whatever the order it gathers them in.  A pair's distance is computed once, from its
@@ -42,7 +42,7 @@ def _append_pairs(pairs: ti.template(), a: ti.i32, held_edge, held_distance, hel
 def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
                grid: ti.template(), boxes: ti.template(), pairs: ti.template(), h: float, margin: float,
                sweep: float, fall: float):
-    """Append every pair (a, b), a < b, whose distance is below its reach
+    """Append every pair (a, b), a < b, whose distance is below its reach, and keep a's closest in a's list
     r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) + fall, with v the edges' mean velocities, s their
     spreads, sweep = velocity_margin dt and fall = velocity_margin |g| dt^2 (one edge may be supported while
     the other falls): a bound on how much closer they can get during the step, from their *relative* motion
@@ -51,7 +51,9 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
     kinematic edges (``grid.edges_kinematic``), are skipped."""
     pairs.pair_count[None] = 0
     t = boxes.table_size
+    K = ti.static(grid.candidates_per_edge)
     for a in grid.edge_candidate_count:
+        own = 0
         if edge.edge_rest_length[a] > 0.0:
             ca = grid.edge_dop_center[a]
             ea = grid.edge_dop_extent[a]
@@ -84,6 +86,7 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                                 if dist < reach:
                                     if edges_kinematic(vertex, a, b):
                                         continue
+                                    own = insert_candidate(grid, a, b, dist, own, K)  # a's side, in a's own row
                                     held_edge[held] = b
                                     held_distance[held] = dist
                                     held += 1
@@ -92,20 +95,21 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                                         held = 0
             if held > 0:
                 _append_pairs(pairs, a, held_edge, held_distance, held)
+        grid.edge_candidate_count[a] = own
 
 
 @ti.kernel
 def gather_candidates(grid: ti.template(), pairs: ti.template()):
     """Per edge, the ``candidates_per_edge`` closest of the pairs it is in, sorted by (distance, other edge),
-    into ``grid.edge_candidate`` / ``edge_candidate_distance`` / ``edge_candidate_count`` (requires
-    ``pair_count`` <= capacity)."""
+    in ``grid.edge_candidate`` / ``edge_candidate_distance`` / ``edge_candidate_count``: the list ``find_pairs``
+    left (the pairs the edge found itself, with higher edges) plus the pairs found by lower edges, gathered by
+    their higher edge (requires ``pair_count`` <= capacity)."""
     K = ti.static(grid.candidates_per_edge)
     n = grid.edge_candidate_count.shape[0]
     count = pairs.pair_count[None]
     for i in range(n + 1):
         pairs.edge_pair_start[i] = 0
     for p in range(count):
-        ti.atomic_add(pairs.edge_pair_start[pairs.pair_edge[p][0]], 1)
         ti.atomic_add(pairs.edge_pair_start[pairs.pair_edge[p][1]], 1)
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -113,16 +117,14 @@ def gather_candidates(grid: ti.template(), pairs: ti.template()):
     for i in range(n):
         pairs.edge_pair_fill[i] = 0
     for p in range(count):
-        for side in ti.static(range(2)):
-            a = pairs.pair_edge[p][side]
-            pairs.edge_pair_list[pairs.edge_pair_start[a] + ti.atomic_add(pairs.edge_pair_fill[a], 1)] = p
-    for a in range(n):
-        c = 0
-        for j in range(pairs.edge_pair_start[a], pairs.edge_pair_start[a + 1]):
+        b = pairs.pair_edge[p][1]
+        pairs.edge_pair_list[pairs.edge_pair_start[b] + ti.atomic_add(pairs.edge_pair_fill[b], 1)] = p
+    for b in range(n):
+        c = grid.edge_candidate_count[b]  # b's own side, from find_pairs
+        for j in range(pairs.edge_pair_start[b], pairs.edge_pair_start[b + 1]):
             p = pairs.edge_pair_list[j]
-            other = pairs.pair_edge[p][0] + pairs.pair_edge[p][1] - a
-            c = insert_candidate(grid, a, other, pairs.pair_distance[p], c, K)
-        grid.edge_candidate_count[a] = c
+            c = insert_candidate(grid, b, pairs.pair_edge[p][0], pairs.pair_distance[p], c, K)
+        grid.edge_candidate_count[b] = c
 
 
 def find_candidates(vertex, edge, x, radius, grid, boxes, pairs: PairFields, h: float, margin: float, sweep: float,
