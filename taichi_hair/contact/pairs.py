@@ -42,13 +42,15 @@ def _append_pairs(pairs: ti.template(), a: ti.i32, held_edge, held_distance, hel
 def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
                grid: ti.template(), boxes: ti.template(), pairs: ti.template(), h: float, margin: float,
                sweep: float, fall: float):
-    """Append every pair (a, b), a < b, whose distance is below its reach, and keep a's closest in a's list
+    """Append every pair (a, b), a < b, whose distance is below its reach
     r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) + fall, with v the edges' mean velocities, s their
     spreads, sweep = velocity_margin dt and fall = velocity_margin |g| dt^2 (one edge may be supported while
     the other falls): a bound on how much closer they can get during the step, from their *relative* motion
-    (hair moving together needs little margin).  ``pair_count`` gets the number found, which may exceed the
-    capacity (the pairs past it are not stored).  Edges of one strand that share a vertex, and pairs of
-    kinematic edges (``grid.edges_kinematic``), are skipped."""
+    (hair moving together needs little margin); and keep the ``candidates_per_edge`` closest of a's pairs in
+    a's own list (``grid.edge_candidate``; ``gather_candidates`` adds the lower edges' pairs).  ``pair_count``
+    gets the number found, which may exceed the capacity (the pairs past it are not stored; a's list is whole
+    either way).  Edges of one strand that share a vertex, and pairs of kinematic edges
+    (``grid.edges_kinematic``), are skipped."""
     pairs.pair_count[None] = 0
     t = boxes.table_size
     K = ti.static(grid.candidates_per_edge)
