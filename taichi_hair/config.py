@@ -204,6 +204,10 @@ class ContactConfig:
             (10 in the paper's hairball; 0 disables it) [-].
         capacity_per_vertex: initial contact buffer size per vertex; grown
             (doubled, and the detection redone) when a step overflows it [-].
+        pairs_per_edge: size of the hair-hair pair buffer per vertex, allocated
+            once; a step that finds more pairs within reach searches in rounds,
+            each edge resuming where the full buffer stopped it (the same
+            lists; ``contact.pairs``) [-].
         relinearize_correction: re-linearise the contacts at the current
             positions before the geometric correction (closest points and
             normals at x, kept on the begin-of-step side; body distance at x),
@@ -354,6 +358,7 @@ class ContactConfig:
     projection_iterations: int = 2
     correction_iterations: int = 10
     capacity_per_vertex: float = 3.0
+    pairs_per_edge: float = 8.0
     continuous_detections: int = 0
     mass_splitting: MassSplitting = MassSplitting.BATCH
     relinearize_correction: bool = True
@@ -405,6 +410,8 @@ class ContactConfig:
         self.mass_splitting = MassSplitting(self.mass_splitting)
         if not (math.isfinite(self.capacity_per_vertex) and self.capacity_per_vertex > 0):
             raise ValueError(f"ContactConfig.capacity_per_vertex must be > 0, got {self.capacity_per_vertex!r}")
+        if not (math.isfinite(self.pairs_per_edge) and 0 < self.pairs_per_edge <= 1000):
+            raise ValueError(f"ContactConfig.pairs_per_edge must be in (0, 1000], got {self.pairs_per_edge!r}")
 
 
 @dataclass

@@ -389,9 +389,9 @@ class PairFields:
     """Hair-hair pairs within reach, each found once (``contact.pairs.find_candidates``), and per edge the pairs it
     is the higher edge of (CSR), which it adds to its closest (``GridFields.edge_candidate``).
 
-    ``capacity`` pairs; the search grows it when a step finds more (counted in ``ContactPipeline.grow_events``;
-    the two search kernels compile again for the new fields, once per growth: the 1,000-strand hairball's
-    pile needs ~36 pairs per edge, the initial capacity holds 3).
+    ``capacity`` pairs, allocated once (``ContactConfig.pairs_per_edge`` per vertex): where a step finds more,
+    the search runs in rounds, each edge resuming where the full buffer stopped it (``edge_pair_resume``); the
+    1,000-strand hairball's pile has ~36 pairs per edge.
     """
 
     def __init__(self, vertex_count: int, capacity: int):
@@ -400,8 +400,12 @@ class PairFields:
         #: The two edges of each pair, lower first [-], shape (capacity, 2); their distance [m], shape (capacity,).
         self.pair_edge = ti.Vector.field(2, ti.i32, capacity)
         self.pair_distance = ti.field(float, capacity)
-        #: Pairs found by the last search (may exceed the capacity: then it grows and searches again) [-].
+        #: Pairs the last round appended (may exceed the capacity: those past it wait for the next round) [-].
         self.pair_count = ti.field(ti.i32, ())
+        #: Per edge: -1 when all its pairs are stored, else the index (in its search order) of the first pair the
+        #: next round stores [-], shape (vertex_count,); the edges still pending after the last round [-].
+        self.edge_pair_resume = ti.field(ti.i32, n)
+        self.pending_count = ti.field(ti.i32, ())
         #: Per edge: the start in ``edge_pair_list`` of the pairs it is the higher edge of, then the total [-],
         #: shape (vertex_count + 1,); a fill cursor, shape (vertex_count,); pair indices by higher edge, shape
         #: (capacity,).

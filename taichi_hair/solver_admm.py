@@ -460,6 +460,8 @@ class SolverADMM(SolverBase):
             rep["hair_hair_search"] = (
                 f"skipped in {con.hair_search_skip_count} of {con.detections} steps (no two strands within reach)"
                 if cfg.skip_when_apart else f"run in every step ({con.detections}; skip_when_apart off)")
+            rep["hair_hair_search"] += (f"; {con.pair_extra_rounds} rounds past the first (pair buffer of "
+                                        f"{con.pairs.capacity} full; ContactConfig.pairs_per_edge)")
         else:
             rep["hair_hair_search"] = "off (ContactConfig.hair_hair = False)"
         if cfg.continuous_detections > 0:

@@ -117,24 +117,40 @@ def _random_groom(seed, strands=80, edge=2e-3, box=0.012):
 
 
 def test_detection_matches_brute_force_on_random_edges():
-    """Random short strands in a small box: the hash grid + DOP + top-K finds exactly the brute-force set."""
+    """Random short strands in a small box: the hash grid + DOP + top-K finds exactly the brute-force set.
+    Then again with a pair buffer of 7 pairs (``contact.pairs``: the search runs in rounds, each edge resuming
+    where the full buffer stopped it, 7 not a multiple of the 8 pairs an edge appends at once): the same set,
+    and every edge's list, its order and its distances bit-identical to the one-round search."""
+    from taichi_hair.contact.pipeline import ContactPipeline
+    from taichi_hair.fields import PairFields
+
     model, mat = _random_groom(7)
     st = model.state()
     cfg = ContactConfig(margin=2e-4, max_contacts_per_edge=6)
-    from taichi_hair.contact.pipeline import ContactPipeline
-
     pipe = ContactPipeline(model, cfg)
     pipe.colliders.begin_step(model.control())
-    total = pipe.detect(st, 1e-3, (0, -9.81, 0), True)
-    vtx = pipe.con.contact_vertex.to_numpy()[:total]
-    found = {(min(v[0], v[2]), max(v[0], v[2])) for v in vtx}
-    assert len(found) == total  # emitted once each
     x = st.positions().astype(np.float64)
     edges = [i for i in range(model.vertex_count) if model.host["edge_rest_length"][i] > 0]
     expected, crowded = _brute_force_contacts(x, model.host["vertex_strand"], edges,
                                               lambda a, b: 2 * mat.radius + cfg.margin, 6)
-    assert found == expected
-    assert total > 100 and crowded > 10  # the 6-closest rule was exercised
+    assert crowded > 10  # the 6-closest rule is exercised
+    lists = []
+    for buffer in (None, 7):
+        if buffer is not None:
+            pipe.pairs = PairFields(model.vertex_count, buffer)
+        total = pipe.detect(st, 1e-3, (0, -9.81, 0), True)
+        vtx = pipe.con.contact_vertex.to_numpy()[:total]
+        found = {(min(v[0], v[2]), max(v[0], v[2])) for v in vtx}
+        assert len(found) == total  # emitted once each
+        assert found == expected
+        assert total > 100
+        g = pipe.grid
+        lists.append([g.edge_candidate_count.to_numpy(), g.edge_candidate.to_numpy(),
+                      g.edge_candidate_distance.to_numpy()])
+        rounds = pipe.pair_rounds_last
+        assert (rounds == 1) if buffer is None else (rounds > 50), rounds  # > 350 pairs within reach: > 50 rounds
+    for one, many in zip(*lists):
+        assert np.array_equal(one, many)
 
 
 def _detected_pairs(pipe, st, dt):

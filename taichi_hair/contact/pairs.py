@@ -12,9 +12,16 @@ both sides for the comparison): 262-302 ms against 565-601 ms, the same lists on
 ``b <= a`` is a branch of its own: Taichi's ``and`` does not short-circuit, and with
 ``b > a and entry_pair_here(...)`` the entry test ran on every entry (375 ms).
 
+The pair buffer has a fixed size (``ContactConfig.pairs_per_edge`` per vertex, allocated once): where a step
+finds more pairs, the search runs in rounds. An edge that meets a full buffer records where it stopped (the
+index of the pair in its own search order) and the next round resumes it there; each round fills the
+buffer, so a search takes ceil(pairs / capacity) rounds and a step allocates nothing. Measured on the same
+pile, 1,052,746 pairs: 218-233 ms in one round, 218-226 ms in 3 to 12 rounds (the edges that finished do
+not search again), the lists bit-identical.
+
 Deterministic: the pairs are appended in any order (atomics), but each edge's list is ordered by
-(distance, index) whatever the order it gathers them in.  A pair's distance is computed once, from its
-lower edge, so both of its edges rank it by the same number.
+(distance, index) whatever the order it gathers them in, and in whichever round.  A pair's distance is
+computed once, from its lower edge, so both of its edges rank it by the same number.
 """
 
 import taichi as ti
@@ -29,75 +36,98 @@ HELD = 8
 
 
 @ti.func
-def _append_pairs(pairs: ti.template(), a: ti.i32, held_edge, held_distance, held: ti.i32):
-    """Append the first ``held`` of edge a's held pairs (a, b) with their distances: one atomic for all."""
+def _append_pairs(pairs: ti.template(), a: ti.i32, held_edge, held_distance, held: ti.i32) -> ti.i32:
+    """Append the first ``held`` of edge a's held pairs (a, b) with their distances, one atomic for all; returns
+    how many fitted in the buffer (fewer than ``held`` once it is full)."""
     base = ti.atomic_add(pairs.pair_count[None], held)
+    stored = ti.max(0, ti.min(held, pairs.capacity - base))
     for j in ti.static(range(HELD)):
-        if j < held and base + j < pairs.capacity:
+        if j < stored:
             pairs.pair_edge[base + j] = ivec2(a, held_edge[j])
             pairs.pair_distance[base + j] = held_distance[j]
+    return stored
 
 
 @ti.kernel
 def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
                grid: ti.template(), boxes: ti.template(), pairs: ti.template(), h: float, margin: float,
                sweep: float, fall: float):
-    """Append every pair (a, b), a < b, whose distance is below its reach
-    r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) + fall, with v the edges' mean velocities, s their
-    spreads, sweep = velocity_margin dt and fall = velocity_margin |g| dt^2 (one edge may be supported while
-    the other falls): a bound on how much closer they can get during the step, from their *relative* motion
-    (hair moving together needs little margin); and keep the ``candidates_per_edge`` closest of a's pairs in
-    a's own list (``grid.edge_candidate``; ``gather_candidates`` adds the lower edges' pairs).  ``pair_count``
-    gets the number found, which may exceed the capacity (the pairs past it are not stored; a's list is whole
-    either way).  Edges of one strand that share a vertex, and pairs of kinematic edges
-    (``grid.edges_kinematic``), are skipped."""
+    """One round of the search: every pending edge a (``pairs.edge_pair_resume[a] >= 0``) appends the pairs
+    (a, b), a < b, whose distance is below their reach r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) +
+    fall, with v the edges' mean velocities, s their spreads, sweep = velocity_margin dt and
+    fall = velocity_margin |g| dt^2 (one edge may be supported while the other falls): a bound on how much
+    closer they can get during the step, from their *relative* motion (hair moving together needs little
+    margin).  It also keeps the ``candidates_per_edge`` closest of its pairs in its own list
+    (``grid.edge_candidate``, merged with what the list holds; ``gather_candidates`` adds the lower edges'
+    pairs).  When the buffer is full, the edge records the index (in its own search order) of the first pair
+    it could not store and stays pending for the next round, which skips the pairs before it: every round
+    fills the buffer, so the search ends after ceil(pairs / capacity) rounds, in a buffer of fixed size.
+    Edges of one strand that share a vertex, and pairs of kinematic edges (``grid.edges_kinematic``), are
+    skipped."""
     pairs.pair_count[None] = 0
+    pairs.pending_count[None] = 0
     t = boxes.table_size
     K = ti.static(grid.candidates_per_edge)
     for a in grid.edge_candidate_count:
-        own = 0
-        if edge.edge_rest_length[a] > 0.0:
-            ca = grid.edge_dop_center[a]
-            ea = grid.edge_dop_extent[a]
-            ra = radius[a]
-            sa = vertex.vertex_strand[a]
-            va = grid.edge_velocity[a]
-            sa_spread = grid.edge_velocity_spread[a]
-            lo = boxes.edge_cell_lo[a]
-            box_lo_a = boxes.edge_box_lo[a]
-            box_hi_a = boxes.edge_box_hi[a]
-            span = boxes.edge_cell_hi[a] - lo + 1
-            # The pairs found, appended HELD at a time: one atomic per HELD pairs instead of one per pair (the
-            # counter is shared by all threads; measured on the 1,000-strand pile: 213 against 234 ms).
-            held_edge = ti.Vector([0] * HELD, ti.i32)
-            held_distance = ti.Vector([0.0] * HELD, float)
-            held = 0
-            for k in range(span[0] * span[1] * span[2]):
-                cell = cell_in_range(lo, k, span)
-                bkt = bucket_of(cell, t)
-                for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
-                    b = boxes.entry_edge[e]
-                    if b <= a:
-                        continue  # a branch of its own: Taichi's ``and`` evaluates both sides (no short circuit)
-                    if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
-                        if not edges_adjacent(vertex, a, b, sa):
-                            rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
-                            reach = ra + radius[b] + margin + sweep * rel + fall
-                            if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
-                                s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-                                if dist < reach:
-                                    if edges_kinematic(vertex, a, b):
-                                        continue
-                                    own = insert_candidate(grid, a, b, dist, own, K)  # a's side, in a's own row
-                                    held_edge[held] = b
-                                    held_distance[held] = dist
-                                    held += 1
-                                    if held == HELD:
-                                        _append_pairs(pairs, a, held_edge, held_distance, held)
-                                        held = 0
-            if held > 0:
-                _append_pairs(pairs, a, held_edge, held_distance, held)
-        grid.edge_candidate_count[a] = own
+        resume = pairs.edge_pair_resume[a]
+        if resume >= 0:
+            own = grid.edge_candidate_count[a]
+            stored_upto = resume  # a's pairs, in its search order, stored in this round or an earlier one
+            full = pairs.pair_count[None] >= pairs.capacity  # nothing fits: the whole edge waits for the next round
+            if edge.edge_rest_length[a] > 0.0 and not full:
+                ca = grid.edge_dop_center[a]
+                ea = grid.edge_dop_extent[a]
+                ra = radius[a]
+                sa = vertex.vertex_strand[a]
+                va = grid.edge_velocity[a]
+                sa_spread = grid.edge_velocity_spread[a]
+                lo = boxes.edge_cell_lo[a]
+                box_lo_a = boxes.edge_box_lo[a]
+                box_hi_a = boxes.edge_box_hi[a]
+                span = boxes.edge_cell_hi[a] - lo + 1
+                # The pairs found, appended HELD at a time: one atomic per HELD pairs instead of one per pair (the
+                # counter is shared by all threads; measured on the 1,000-strand pile: 213 against 234 ms).
+                held_edge = ti.Vector([0] * HELD, ti.i32)
+                held_distance = ti.Vector([0.0] * HELD, float)
+                held = 0
+                found = 0
+                for k in range(span[0] * span[1] * span[2]):
+                    cell = cell_in_range(lo, k, span)
+                    bkt = bucket_of(cell, t)
+                    for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
+                        b = boxes.entry_edge[e]
+                        if full or b <= a:
+                            continue  # a branch of its own: Taichi's ``and`` evaluates both sides (no short circuit)
+                        if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
+                            if not edges_adjacent(vertex, a, b, sa):
+                                rel = (va - grid.edge_velocity[b]).norm() + sa_spread + grid.edge_velocity_spread[b]
+                                reach = ra + radius[b] + margin + sweep * rel + fall
+                                if dops_overlap(ca, ea, grid.edge_dop_center[b], grid.edge_dop_extent[b], reach):
+                                    s, u, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+                                    if dist < reach:
+                                        if edges_kinematic(vertex, a, b):
+                                            continue
+                                        own = insert_candidate(grid, a, b, dist, own, K)  # a's side, in a's own row
+                                        if found >= resume:  # not stored by an earlier round
+                                            held_edge[held] = b
+                                            held_distance[held] = dist
+                                            held += 1
+                                            if held == HELD:
+                                                stored = _append_pairs(pairs, a, held_edge, held_distance, held)
+                                                stored_upto += stored
+                                                full = stored < held
+                                                held = 0
+                                        found += 1
+                if held > 0 and not full:
+                    stored = _append_pairs(pairs, a, held_edge, held_distance, held)
+                    stored_upto += stored
+                    full = stored < held
+            if full:
+                ti.atomic_add(pairs.pending_count[None], 1)
+                pairs.edge_pair_resume[a] = stored_upto
+            else:
+                pairs.edge_pair_resume[a] = -1
+            grid.edge_candidate_count[a] = own
 
 
 @ti.kernel
@@ -105,10 +135,12 @@ def gather_candidates(grid: ti.template(), pairs: ti.template()):
     """Per edge, the ``candidates_per_edge`` closest of the pairs it is in, sorted by (distance, other edge),
     in ``grid.edge_candidate`` / ``edge_candidate_distance`` / ``edge_candidate_count``: the list ``find_pairs``
     left (the pairs the edge found itself, with higher edges) plus the pairs found by lower edges, gathered by
-    their higher edge (requires ``pair_count`` <= capacity)."""
+    their higher edge, for the pairs the last round of ``find_pairs`` stored.  Lists are merged, so the rounds
+    of one search add up to the pairs of a single round with a buffer large enough (``insert_candidate`` skips
+    a pair the list holds, and one it dropped for closer ones is dropped again)."""
     K = ti.static(grid.candidates_per_edge)
     n = grid.edge_candidate_count.shape[0]
-    count = pairs.pair_count[None]
+    count = ti.min(pairs.pair_count[None], pairs.capacity)
     for i in range(n + 1):
         pairs.edge_pair_start[i] = 0
     for p in range(count):
@@ -130,17 +162,16 @@ def gather_candidates(grid: ti.template(), pairs: ti.template()):
 
 
 def find_candidates(vertex, edge, x, radius, grid, boxes, pairs: PairFields, h: float, margin: float, sweep: float,
-                    fall: float) -> tuple:
-    """Each edge's closest colliding edges (``find_pairs`` + ``gather_candidates``) with the boxes already in the
-    grid of cells h [m].  Returns ``(pairs, grown)``: the pair buffer, a larger one where the search found more
-    pairs than ``pairs`` holds (it then searched again), and whether it grew."""
-    grown = False
+                    fall: float) -> int:
+    """Each edge's closest colliding edges (``find_pairs`` + ``gather_candidates``, in rounds until every edge
+    has stored its pairs) with the boxes already in the grid of cells h [m].  Returns the number of rounds
+    (1 when the buffer holds all the pairs within reach); nothing is allocated."""
+    grid.edge_candidate_count.fill(0)
+    pairs.edge_pair_resume.fill(0)
+    rounds = 0
     while True:
         find_pairs(vertex, edge, x, radius, grid, boxes, pairs, h, margin, sweep, fall)
-        found = int(pairs.pair_count[None])
-        if found <= pairs.capacity:
-            break
-        pairs = PairFields(grid.edge_candidate_count.shape[0], max(2 * pairs.capacity, int(1.25 * found)))
-        grown = True
-    gather_candidates(grid, pairs)
-    return pairs, grown
+        gather_candidates(grid, pairs)
+        rounds += 1
+        if int(pairs.pending_count[None]) == 0:
+            return rounds

@@ -64,8 +64,12 @@ class ContactPipeline:
         while table < 2 * n:
             table *= 2
         self.grid = GridFields(n, config.max_contacts_per_edge)
-        #: Hair-hair pairs within reach, each found once (``pairs.find_candidates``; grows when a step finds more).
-        self.pairs = PairFields(n, max(1 << 12, 3 * n))
+        #: Hair-hair pairs within reach, each found once (``pairs.find_candidates``): a buffer of fixed size, the
+        #: search runs in rounds when a step finds more pairs than it holds.
+        self.pairs = PairFields(n, max(256, int(config.pairs_per_edge * n)))
+        #: Rounds of the last hair-hair search, and rounds past the first since the pipeline was made.
+        self.pair_rounds_last = 0
+        self.pair_extra_rounds = 0
         #: Multi-insert hash of edge boxes, shared by proximity and continuous detection.
         self.boxes = BoxGridFields(n, table, max(12 * n, 1 << 14))
         capacity = max(16, int(config.capacity_per_vertex * n))
@@ -187,9 +191,9 @@ class ContactPipeline:
                 self.hair_search_skip_count += 1
             else:
                 h = self._fill_box_grid(max(max_edge, 1e-9))
-                self.pairs, grown = find_candidates(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes, self.pairs, h,
-                                                    margin, sweep, fall)
-                self.grow_events += int(grown)
+                self.pair_rounds_last = find_candidates(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes,
+                                                        self.pairs, h, margin, sweep, fall)
+                self.pair_extra_rounds += self.pair_rounds_last - 1
         else:
             g.edge_candidate_count.fill(0)
         sweep, fall = body_sweep, body_fall
