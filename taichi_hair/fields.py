@@ -287,6 +287,9 @@ class ContactFields:
         self.vertex_contact_start = ti.field(ti.i32, n + 1)
         #: CSR entries (contact indices) [-], shape (4 * capacity,).
         self.vertex_contact_list = ti.field(ti.i32, 4 * c)
+        #: h_ci / D_hat_c of each CSR entry, 0 where D_hat_c = 0 (``narrow.store_entry_coefficients``): the
+        #: factor of the contact's correction in its vertex's update [N/m], shape (4 * capacity,).
+        self.vertex_contact_coefficient = ti.field(float, 4 * c)
         #: Where batch b begins in vertex i's CSR list (it ends where batch b + 1 begins, the last batch at
         #: ``vertex_contact_start[i + 1]``) [-], shape (vertex_count, BATCHES).
         self.vertex_batch_start = ti.field(ti.i32, (n, CONTACT_BATCHES))

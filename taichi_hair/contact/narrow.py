@@ -331,6 +331,27 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
             con.contact_kinematic[c] = -ref - radius[i] * nrm
     for c in range(nc):
         con.contact_delassus[c] = _delassus(con, c, split_by_batch)
+    store_entry_coefficients(con)
+
+
+@ti.func
+def store_entry_coefficients(con: ti.template()):
+    """h_ci / D_hat_c of every CSR entry (vertex i, contact c), 0 where D_hat_c = 0: what the batch updates
+    (``projection.apply_batch_corrections``) multiply each correction by, read in entry order instead of
+    gathered from the contact's four vertices, weights and D_hat.  Run wherever weights or D_hat change."""
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
+            c = con.vertex_contact_list[e]
+            dh = con.contact_delassus[c]
+            coef = 0.0
+            if dh > 0.0:
+                h = 0.0
+                for j in ti.static(range(4)):
+                    if con.contact_vertex[c][j] == i:
+                        h += con.contact_weight[c][j]
+                coef = h / dh
+            con.vertex_contact_coefficient[e] = coef
 
 
 @ti.func
@@ -437,3 +458,4 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             con.contact_delta[c] = vec3(0.0)
             con.contact_status[c] = 0
         con.contact_delassus[c] = dh
+    store_entry_coefficients(con)

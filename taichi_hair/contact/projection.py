@@ -127,7 +127,8 @@ def solve_batch_contacts(con: ti.template(), z: ti.template(), batch: ti.templat
 def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.template()):
     """Step (2): z_i += W_z,i^-1 sum_{c in batch} h_ci Delta u_c / D_hat_c, vertices in parallel.
 
-    Each vertex's list is sorted by batch (``contacts.build_adjacency``): only the batch's entries are read."""
+    Each vertex's list is sorted by batch (``contacts.build_adjacency``): only the batch's entries are read,
+    with their factors h_ci / D_hat_c (``narrow.store_entry_coefficients``)."""
     for k in range(con.active_vertex_count[None]):
         i = con.active_vertex[k]
         iw = con.vertex_contact_inv_weight[i]
@@ -137,10 +138,7 @@ def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.temp
             if ti.static(batch + 1 < BATCHES):
                 stop = con.vertex_batch_start[i, batch + 1]
             for e in range(con.vertex_batch_start[i, batch], stop):
-                c = con.vertex_contact_list[e]
-                dh = con.contact_delassus[c]
-                if dh > 0.0:
-                    dz += (_weight_of(con, c, i) / dh) * con.contact_delta[c]
+                dz += con.vertex_contact_coefficient[e] * con.contact_delta[con.vertex_contact_list[e]]
             z[i] += iw * dz
 
 
@@ -204,6 +202,28 @@ def _hold_edge(vertex: ti.template(), edge: ti.template(), z: ti.template(), len
 
 
 @ti.func
+def _inverse_mass(vertex: ti.template(), i: ti.i32) -> float:
+    """1/m_i, 0 on kinematic vertices [1/kg]."""
+    w = 0.0
+    if vertex.vertex_is_fixed[i] == 0:
+        w = 1.0 / vertex.vertex_mass[i]
+    return w
+
+
+@ti.func
+def _hold_pair(edge: ti.template(), length: ti.template(), j: ti.i32, za, zb, wa: float, wb: float):
+    """``_hold_edge`` on edge j with its end points za, zb and inverse masses wa, wb given; returns them moved."""
+    if edge.edge_rest_length[j] > 0.0:
+        d = zb - za
+        dn = d.norm()
+        if wa + wb > 0.0 and dn > 0.0:
+            corr = ((dn - length[j]) / ((wa + wb) * dn)) * d
+            za += wa * corr
+            zb -= wb * corr
+    return za, zb
+
+
+@ti.func
 def hold_edge_lengths(vertex: ti.template(), edge: ti.template(), z: ti.template(), length: ti.template(),
                       colour: ti.template()):
     """Project the edges of one colour (local edge index parity) back to their held lengths (``_hold_edge``).
@@ -223,10 +243,29 @@ def hold_strand_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.t
     for s in strand.strand_vertex_start:
         start = strand.strand_vertex_start[s]
         m = strand.strand_vertex_count[s]
+        # ``_hold_edge`` on edges start, ..., start + m - 2 and back, the operations unchanged, but the vertex
+        # two edges share kept in registers from one edge to the next (not stored and loaded again).
+        za = z[start]
+        wa = _inverse_mass(vertex, start)
         for k in range(m - 1):
-            _hold_edge(vertex, edge, z, length, start + k)
+            j = start + k
+            zb = z[j + 1]
+            wb = _inverse_mass(vertex, j + 1)
+            za, zb = _hold_pair(edge, length, j, za, zb, wa, wb)
+            z[j] = za
+            za = zb
+            wa = wb
+        zb = za
+        wb = wa
         for k in range(m - 1):
-            _hold_edge(vertex, edge, z, length, start + m - 2 - k)
+            j = start + m - 2 - k
+            za = z[j]
+            wa = _inverse_mass(vertex, j)
+            za, zb = _hold_pair(edge, length, j, za, zb, wa, wb)
+            z[j + 1] = zb
+            zb = za
+            wb = wa
+        z[start] = zb
 
 
 @ti.func
