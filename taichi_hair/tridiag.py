@@ -36,17 +36,26 @@ def thomas_strand(start: ti.i32, m: ti.i32, lower: ti.template(), diag: ti.templ
     Shared by :func:`thomas_solve` and the fused strand schedule
     (:mod:`taichi_hair.schedule_strand`), so both do the same arithmetic.
     """
+    # c'_{i-1}, d'_{i-1} and, going back, x_{i+1} are carried in registers: the same operations, without
+    # loading again what the row before stored (measured: Taichi does not forward a field's store to the
+    # next row's load; the strand-serial edge passes of the contact correction ran 2.8x faster so).
     inv = 1.0 / diag[start]
-    upper[start] = upper[start] * inv
-    rhs[start] = rhs[start] * inv
+    cp = upper[start] * inv
+    dp = rhs[start] * inv
+    upper[start] = cp
+    rhs[start] = dp
     for k in range(1, m):
         i = start + k
-        inv_k = 1.0 / (diag[i] - lower[i] * upper[i - 1])
-        upper[i] = upper[i] * inv_k
-        rhs[i] = (rhs[i] - lower[i] * rhs[i - 1]) * inv_k
+        low = lower[i]
+        inv_k = 1.0 / (diag[i] - low * cp)
+        cp = upper[i] * inv_k
+        dp = (rhs[i] - low * dp) * inv_k
+        upper[i] = cp
+        rhs[i] = dp
     for kk in range(1, m):
         i = start + m - 1 - kk
-        rhs[i] = rhs[i] - upper[i] * rhs[i + 1]
+        dp = rhs[i] - upper[i] * dp
+        rhs[i] = dp
 
 
 @ti.kernel
