@@ -133,13 +133,15 @@ def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.temp
         i = con.active_vertex[k]
         iw = con.vertex_contact_inv_weight[i]
         if iw > 0.0:
-            dz = vec3(0.0)
+            begin = con.vertex_batch_start[i, batch]
             stop = con.vertex_contact_start[i + 1]
             if ti.static(batch + 1 < BATCHES):
                 stop = con.vertex_batch_start[i, batch + 1]
-            for e in range(con.vertex_batch_start[i, batch], stop):
-                dz += con.vertex_contact_coefficient[e] * con.contact_delta[con.vertex_contact_list[e]]
-            z[i] += iw * dz
+            if stop > begin:  # else no contact of i in this batch: z_i stays (and is neither read nor written)
+                dz = vec3(0.0)
+                for e in range(begin, stop):
+                    dz += con.vertex_contact_coefficient[e] * con.contact_delta[con.vertex_contact_list[e]]
+                z[i] += iw * dz
 
 
 @ti.func
