@@ -554,6 +554,9 @@ def test_bad_collider_parameters_name_the_field():
         CapsuleCollider(friction=float("nan"))
     with pytest.raises(ValueError, match="ContactConfig.friction"):
         ContactConfig(friction=-0.1)
+    for bad in (0.0, -1.0, float("nan"), float("inf"), 1e6):
+        with pytest.raises(ValueError, match="ContactConfig.pairs_per_edge"):
+            ContactConfig(pairs_per_edge=bad)
     with pytest.raises(ValueError, match="body 3 does not exist"):
         ColliderSet([SphereCollider(body=3)], 1)
 
