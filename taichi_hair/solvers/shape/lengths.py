@@ -77,23 +77,27 @@ def follow_the_leader(use_colliders: ti.template(), model: ti.template(), solver
         fallback = quat_rotate(solver.strand_head_rotation[s],
                                safe_normalized(model.vertex_rest_position[a + 1] - model.vertex_rest_position[a],
                                                vec3(1.0, 0.0, 0.0)))
+        leader = x[a]  # x_{i-1} as placed, carried in a register (the same operations, one load less)
         for k in range(1, m):
             i = a + k
-            e = x[i] - x[i - 1]
+            xi = x[i]
+            e = xi - leader
             direction = safe_normalized(e, fallback)
             fallback = direction
             if model.vertex_is_fixed[i] == 0:
                 rest = model.edge_rest_length[i - 1]
-                p = x[i - 1] + rest * direction
+                p = leader + rest * direction
                 if ti.static(use_colliders):
                     for c in range(cs.count_field[None]):
                         if acts_on(cs, c, s):
-                            p = place_at_length_outside_collider(cs, c, x[i - 1], p, rest,
+                            p = place_at_length_outside_collider(cs, c, leader, p, rest,
                                                                  solver.vertex_collision_radius[i])
                     for c in range(cs.count_field[None]):  # the last word is the colliders'
                         if acts_on(cs, c, s):
                             p = project_out_of_collider_normal(cs, c, p, solver.vertex_collision_radius[i])
-                solver.vertex_length_correction[i] = p - x[i]
+                solver.vertex_length_correction[i] = p - xi
                 x[i] = p
+                leader = p
             else:
                 solver.vertex_length_correction[i] = vec3(0.0)
+                leader = xi
