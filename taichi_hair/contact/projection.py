@@ -185,25 +185,6 @@ def end_correction(vertex: ti.template(), x: ti.template(), con: ti.template()):
 
 
 @ti.func
-def _hold_edge(vertex: ti.template(), edge: ti.template(), z: ti.template(), length: ti.template(), j: ti.i32):
-    """Project edge j back to its held length, mass-weighted.
-
-    Edge j joins vertices j and j+1; C = |z_{j+1} - z_j| - l_j moves them along the edge by
-    w_j / (w_j + w_{j+1}) C and w_{j+1} / (w_j + w_{j+1}) C, with w = 1/m (0 on kinematic vertices), the
-    position-based projection of an inextensibility constraint (Mueller et al. 2007).
-    """
-    if edge.edge_rest_length[j] > 0.0:
-        wa = 0.0 if vertex.vertex_is_fixed[j] != 0 else 1.0 / vertex.vertex_mass[j]
-        wb = 0.0 if vertex.vertex_is_fixed[j + 1] != 0 else 1.0 / vertex.vertex_mass[j + 1]
-        d = z[j + 1] - z[j]
-        dn = d.norm()
-        if wa + wb > 0.0 and dn > 0.0:
-            corr = ((dn - length[j]) / ((wa + wb) * dn)) * d
-            z[j] += wa * corr
-            z[j + 1] -= wb * corr
-
-
-@ti.func
 def _inverse_mass(vertex: ti.template(), i: ti.i32) -> float:
     """1/m_i, 0 on kinematic vertices [1/kg]."""
     w = 0.0
@@ -214,7 +195,13 @@ def _inverse_mass(vertex: ti.template(), i: ti.i32) -> float:
 
 @ti.func
 def _hold_pair(edge: ti.template(), length: ti.template(), j: ti.i32, za, zb, wa: float, wb: float):
-    """``_hold_edge`` on edge j with its end points za, zb and inverse masses wa, wb given; returns them moved."""
+    """Project edge j, with end points za = z_j and zb = z_{j+1} and inverse masses wa, wb, back to its held
+    length; returns the moved end points.
+
+    C = |z_{j+1} - z_j| - l_j moves them along the edge by w_j / (w_j + w_{j+1}) C and
+    w_{j+1} / (w_j + w_{j+1}) C, with w = 1/m (0 on kinematic vertices), the position-based projection of an
+    inextensibility constraint (Mueller et al. 2007).
+    """
     if edge.edge_rest_length[j] > 0.0:
         d = zb - za
         dn = d.norm()
@@ -223,6 +210,16 @@ def _hold_pair(edge: ti.template(), length: ti.template(), j: ti.i32, za, zb, wa
             za += wa * corr
             zb -= wb * corr
     return za, zb
+
+
+@ti.func
+def _hold_edge(vertex: ti.template(), edge: ti.template(), z: ti.template(), length: ti.template(), j: ti.i32):
+    """``_hold_pair`` on edge j of z, in place (only real edges are written: a ghost edge's j + 1 is the next
+    strand's root, which an edge of the same colour may be moving)."""
+    if edge.edge_rest_length[j] > 0.0:
+        za, zb = _hold_pair(edge, length, j, z[j], z[j + 1], _inverse_mass(vertex, j), _inverse_mass(vertex, j + 1))
+        z[j] = za
+        z[j + 1] = zb
 
 
 @ti.func
