@@ -19,6 +19,11 @@ from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, SPLIT_NONE, build_adjacency
 #: with 4 and 0.026 / 0.19 % with 8; the hairball (300 strands, 12 frames) 0.18 / 0.79 % and 0.13 / 0.66 %,
 #: its hair-pair penetration p99 (worst frame) 36 and 32 um.
 _FINAL_EDGE_PASSES = 8
+#: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial``) [-].  Measured
+#: on 2 cores (2026-12-05, bit-identical either way): the head turn (6,148 contacts) 761 -> 529 ms per frame, the
+#: ponytail (11,000) 1,001 -> 679; the 1,000-strand hairball (35,650 on average, 70k in the pile) 2,121 parallel,
+#: 2,060 with this bound, 2,002 all serial.  Kept low so that machines with more cores keep their parallelism.
+_SERIAL_CONTACTS = 20_000
 #: Plain sweeps after each (re)start of the correction before the Chebyshev acceleration begins (Wang 2015's S).
 _CHEBYSHEV_DELAY = 3
 #: (v0, omega, c) of the world frame: hair-hair reaches from the plain velocities (``ContactConfig.rigid_reach`` off).
@@ -356,8 +361,9 @@ class ContactPipeline:
         from .projection import projection_begin, projection_end, projection_sweep
 
         projection_begin(x, self.con, False)
+        serial = self._serial()
         for _ in range(sweeps):
-            projection_sweep(self.con)
+            projection_sweep(self.con, serial)
         projection_end(x, self.con, buf)
 
     def correct(self, x, x0, sweeps: int) -> None:
@@ -405,6 +411,7 @@ class ContactPipeline:
         if hold:
             store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
         projection_begin(x, self.con, True)
+        serial = self._serial()
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else 0.25 * self.max_radius
         cap = max(sweeps, cfg.correction_max_iterations)
         rho = cfg.correction_chebyshev_rho
@@ -418,9 +425,9 @@ class ContactPipeline:
         target = sweeps
         while target > 0:
             if hold:
-                correction_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along)
+                correction_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along, serial)
             else:
-                projection_sweep(self.con)
+                projection_sweep(self.con, serial)
             done += 1
             since += 1
             if rho > 0:
@@ -469,6 +476,11 @@ class ContactPipeline:
                 since = 0
         self.correction_sweeps_last = done
         correction_end(m.vertex, x, self.con)
+
+    def _serial(self) -> bool:
+        """Whether the contact sweeps run their loops on the launching thread: below ``_SERIAL_CONTACTS``
+        contacts, on the CPU (each of a sweep's 16 parallel loops costs a dispatch to the thread pool)."""
+        return (not on_gpu()) and self.contact_count < _SERIAL_CONTACTS
 
     def _restart_correction(self, x, x0, split, frictionless) -> None:
         """Re-linearise every contact at x and restart the correction from it (z = x, r~ = 0)."""

@@ -106,10 +106,11 @@ def _contact_u(con: ti.template(), z: ti.template(), c: ti.i32):
 
 
 @ti.func
-def solve_batch_contacts(con: ti.template(), z: ti.template(), batch: ti.template()):
+def solve_batch_contacts(con: ti.template(), z: ti.template(), batch: ti.template(), serial: ti.template()):
     """Step (1) for the contacts of one batch, in parallel."""
     nc = ti.min(con.contact_count[None], con.capacity)
     nb = (nc - batch + 7) // 8
+    ti.loop_config(serialize=serial)
     for j in range(nb):
         c = j * 8 + batch
         if con.contact_delassus[c] > 0.0:
@@ -124,11 +125,12 @@ def solve_batch_contacts(con: ti.template(), z: ti.template(), batch: ti.templat
 
 
 @ti.func
-def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.template()):
+def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.template(), serial: ti.template()):
     """Step (2): z_i += W_z,i^-1 sum_{c in batch} h_ci Delta u_c / D_hat_c, vertices in parallel.
 
     Each vertex's list is sorted by batch (``contacts.build_adjacency``): only the batch's entries are read,
     with their factors h_ci / D_hat_c (``narrow.store_entry_coefficients``)."""
+    ti.loop_config(serialize=serial)
     for k in range(con.active_vertex_count[None]):
         i = con.active_vertex[k]
         iw = con.vertex_contact_inv_weight[i]
@@ -355,29 +357,32 @@ def projection_begin(x: ti.template(), con: ti.template(), correction: ti.templa
 
 
 @ti.kernel
-def projection_sweep(con: ti.template()):
+def projection_sweep(con: ti.template(), serial: ti.template()):
     """One Gauss-Seidel sweep over the 8 batches, each in the paper's two deterministic steps.
 
     Each step is a top-level loop of the kernel; Taichi runs top-level loops
-    one after the other, so the batches stay sequential within one launch.
+    one after the other, so the batches stay sequential within one launch.  ``serial``: every loop runs on
+    the launching thread (``ContactPipeline._serial``: where the contacts are few, the 16 dispatches to the
+    thread pool cost more than the work; the same operations in the same order, so the same bits).
     """
     for batch in ti.static(range(BATCHES)):
-        solve_batch_contacts(con, con.vertex_z, batch)
-        apply_batch_corrections(con, con.vertex_z, batch)
+        solve_batch_contacts(con, con.vertex_z, batch, serial)
+        apply_batch_corrections(con, con.vertex_z, batch, serial)
 
 
 @ti.kernel
 def correction_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.template(), con: ti.template(),
-                     length: ti.template(), along_strands: ti.template()):
+                     length: ti.template(), along_strands: ti.template(), serial: ti.template()):
     """One sweep of the length-holding geometric correction: the 8 contact batches, then the edge lengths
     (``hold_lengths``).
 
     A Gauss-Seidel pass over contacts and inextensibility together, so a crossed pair pushed back drags
-    its strands' neighbouring vertices along instead of stretching the edges at the contact.
+    its strands' neighbouring vertices along instead of stretching the edges at the contact.  ``serial``: the
+    contact loops on the launching thread (``projection_sweep``).
     """
     for batch in ti.static(range(BATCHES)):
-        solve_batch_contacts(con, con.vertex_z, batch)
-        apply_batch_corrections(con, con.vertex_z, batch)
+        solve_batch_contacts(con, con.vertex_z, batch, serial)
+        apply_batch_corrections(con, con.vertex_z, batch, serial)
     hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands)
 
 
