@@ -24,6 +24,8 @@ _FINAL_EDGE_PASSES = 8
 #: ponytail (11,000) 1,001 -> 679; the 1,000-strand hairball (35,650 on average, 70k in the pile) 2,121 parallel,
 #: 2,060 with this bound, 2,002 all serial.  Kept low so that machines with more cores keep their parallelism.
 _SERIAL_CONTACTS = 20_000
+#: Vertices under which the correction's edge passes and acceleration run serially on the CPU [-].
+_SERIAL_VERTICES = 20_000
 #: Plain sweeps after each (re)start of the correction before the Chebyshev acceleration begins (Wang 2015's S).
 _CHEBYSHEV_DELAY = 3
 #: (v0, omega, c) of the world frame: hair-hair reaches from the plain velocities (``ContactConfig.rigid_reach`` off).
@@ -412,6 +414,8 @@ class ContactPipeline:
             store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
         projection_begin(x, self.con, True)
         serial = self._serial()
+        # The per-vertex and per-strand loops of the correction on the launching thread too, in a small model.
+        small = (not on_gpu()) and m.vertex_count < _SERIAL_VERTICES
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else 0.25 * self.max_radius
         cap = max(sweeps, cfg.correction_max_iterations)
         rho = cfg.correction_chebyshev_rho
@@ -425,17 +429,18 @@ class ContactPipeline:
         target = sweeps
         while target > 0:
             if hold:
-                correction_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along, serial)
+                correction_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along, serial,
+                                 small)
             else:
                 projection_sweep(self.con, serial)
             done += 1
             since += 1
             if rho > 0:
                 if since < _CHEBYSHEV_DELAY:
-                    chebyshev_step(m.vertex, self.con, self._cheb[0], self._cheb[1], 1.0, True)
+                    chebyshev_step(m.vertex, self.con, self._cheb[0], self._cheb[1], 1.0, True, small)
                 else:
                     omega = 2.0 / (2.0 - rho * rho) if since == _CHEBYSHEV_DELAY else 4.0 / (4.0 - rho * rho * omega)
-                    chebyshev_step(m.vertex, self.con, self._cheb[0], self._cheb[1], omega, False)
+                    chebyshev_step(m.vertex, self.con, self._cheb[0], self._cheb[1], omega, False, small)
             if done == target:
                 if hold:
                     # Edge passes alone: each Gauss-Seidel sweep leaves the colour projected first off by a
@@ -443,7 +448,8 @@ class ContactPipeline:
                     # run before the depth check, so the check sees what the correction would return (they
                     # re-open contacts: p99 12 -> 36 um, measured on the hairball, when they ran after it).
                     for _ in range(_FINAL_EDGE_PASSES):
-                        hold_lengths_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along)
+                        hold_lengths_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along,
+                                           small)
                 stop = done >= cap
                 if not stop:
                     # Past the fixed sweeps, go on in groups of 5 while a contact is deeper than the tolerance.

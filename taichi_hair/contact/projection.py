@@ -237,11 +237,12 @@ def hold_edge_lengths(vertex: ti.template(), edge: ti.template(), z: ti.template
 
 @ti.func
 def hold_strand_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.template(), z: ti.template(),
-                        length: ti.template()):
+                        length: ti.template(), serial: ti.template()):
     """Project every edge back to its held length (``_hold_edge``) root to tip and then tip to root, one
     strand per thread (bitwise reproducible): a symmetric Gauss-Seidel pass that carries a contact's push
     along the whole strand in one sweep, where the two colours carry it one edge per sweep."""
-    for s in strand.strand_vertex_start:
+    ti.loop_config(serialize=serial)
+    for s in range(strand.strand_vertex_start.shape[0]):
         start = strand.strand_vertex_start[s]
         m = strand.strand_vertex_count[s]
         # ``_hold_edge`` on edges start, ..., start + m - 2 and back, the operations unchanged, but the vertex
@@ -271,10 +272,10 @@ def hold_strand_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.t
 
 @ti.func
 def hold_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.template(), z: ti.template(),
-                 length: ti.template(), along_strands: ti.template()):
+                 length: ti.template(), along_strands: ti.template(), serial: ti.template()):
     """One pass of the edge lengths: along each strand (``hold_strand_lengths``) or both colours."""
     if ti.static(along_strands):
-        hold_strand_lengths(vertex, edge, strand, z, length)
+        hold_strand_lengths(vertex, edge, strand, z, length, serial)
     else:
         for colour in ti.static(range(2)):
             hold_edge_lengths(vertex, edge, z, length, colour)
@@ -372,18 +373,19 @@ def projection_sweep(con: ti.template(), serial: ti.template()):
 
 @ti.kernel
 def correction_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.template(), con: ti.template(),
-                     length: ti.template(), along_strands: ti.template(), serial: ti.template()):
+                     length: ti.template(), along_strands: ti.template(), serial: ti.template(),
+                     serial_strands: ti.template()):
     """One sweep of the length-holding geometric correction: the 8 contact batches, then the edge lengths
     (``hold_lengths``).
 
     A Gauss-Seidel pass over contacts and inextensibility together, so a crossed pair pushed back drags
     its strands' neighbouring vertices along instead of stretching the edges at the contact.  ``serial``: the
-    contact loops on the launching thread (``projection_sweep``).
+    contact loops on the launching thread (``projection_sweep``); ``serial_strands``: the edge passes too.
     """
     for batch in ti.static(range(BATCHES)):
         solve_batch_contacts(con, con.vertex_z, batch, serial)
         apply_batch_corrections(con, con.vertex_z, batch, serial)
-    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands)
+    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial_strands)
 
 
 @ti.kernel
@@ -400,18 +402,19 @@ def projection_end(x: ti.template(), con: ti.template(), buf: ti.template()):
 
 @ti.kernel
 def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.template(), con: ti.template(),
-                       length: ti.template(), along_strands: ti.template()):
+                       length: ti.template(), along_strands: ti.template(), serial: ti.template()):
     """The edge lengths once more (``hold_lengths``), after the last contact sweep of the correction."""
-    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands)
+    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial)
 
 
 @ti.kernel
 def chebyshev_step(vertex: ti.template(), con: ti.template(), prev: ti.template(), cur: ti.template(), omega: float,
-                   first: ti.template()):
+                   first: ti.template(), serial: ti.template()):
     """Chebyshev semi-iterative acceleration of the correction's sweeps (Wang 2015, for position-based
     projections): z_{k+1} = omega (z~_{k+1} - z_{k-1}) + z_{k-1}, with z~ the sweep's result; ``prev`` and
     ``cur`` hold z_{k-1} and z_k and move on by one.  ``first``: only record z (omega unused)."""
-    for i in con.vertex_z:
+    ti.loop_config(serialize=serial)
+    for i in range(con.vertex_z.shape[0]):
         zt = con.vertex_z[i]
         if ti.static(first):
             prev[i] = zt
