@@ -403,7 +403,8 @@ def projection_end(x: ti.template(), con: ti.template(), buf: ti.template()):
 @ti.kernel
 def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.template(), con: ti.template(),
                        length: ti.template(), along_strands: ti.template(), serial: ti.template()):
-    """The edge lengths once more (``hold_lengths``), after the last contact sweep of the correction."""
+    """The edge lengths once more (``hold_lengths``), after the last contact sweep of the correction; ``serial``:
+    on the launching thread (a small model, ``ContactPipeline.correct``)."""
     hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial)
 
 
@@ -412,7 +413,8 @@ def chebyshev_step(vertex: ti.template(), con: ti.template(), prev: ti.template(
                    first: ti.template(), serial: ti.template()):
     """Chebyshev semi-iterative acceleration of the correction's sweeps (Wang 2015, for position-based
     projections): z_{k+1} = omega (z~_{k+1} - z_{k-1}) + z_{k-1}, with z~ the sweep's result; ``prev`` and
-    ``cur`` hold z_{k-1} and z_k and move on by one.  ``first``: only record z (omega unused)."""
+    ``cur`` hold z_{k-1} and z_k and move on by one.  ``first``: only record z (omega unused); ``serial``: on
+    the launching thread."""
     ti.loop_config(serialize=serial)
     for i in range(con.vertex_z.shape[0]):
         zt = con.vertex_z[i]
