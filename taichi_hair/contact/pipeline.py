@@ -19,7 +19,7 @@ from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, SPLIT_NONE, build_adjacency
 #: with 4 and 0.026 / 0.19 % with 8; the hairball (300 strands, 12 frames) 0.18 / 0.79 % and 0.13 / 0.66 %,
 #: its hair-pair penetration p99 (worst frame) 36 and 32 um.
 _FINAL_EDGE_PASSES = 8
-#: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial``) [-].  Measured
+#: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial_contacts``) [-].  Measured
 #: on 2 cores (2026-12-05, bit-identical either way): the head turn (6,148 contacts) 761 -> 529 ms per frame, the
 #: ponytail (11,000) 1,001 -> 679; the 1,000-strand hairball (35,650 on average, 70k in the pile) 2,121 parallel,
 #: 2,060 with this bound, 2,002 all serial.  Kept low so that machines with more cores keep their parallelism.
@@ -86,8 +86,16 @@ class ContactPipeline:
         self.edge_held_length = ti.field(float, n)
         #: Sweeps of the geometric correction in the last step (reported in ``statistics``).
         self.correction_sweeps_last = 0
-        #: z_{k-1}, z_k of the correction's Chebyshev acceleration (allocated on first use).
+        #: z_{k-1}, z_k of the correction's Chebyshev acceleration (allocated here when the correction uses it, so a
+        #: step allocates nothing; a config changed afterwards gets them on first use).
         self._cheb = None
+        if config.correction_chebyshev_rho > 0 and config.correction_iterations > 0:
+            self._cheb = (ti.Vector.field(3, float, n), ti.Vector.field(3, float, n))
+        #: Whether the contact sweeps run their loops on the launching thread (CPU, fewer than ``_SERIAL_CONTACTS``
+        #: contacts at the last detection: each of a sweep's 16 parallel loops costs a dispatch to the thread
+        #: pool), and the correction's edge passes and acceleration too (CPU, fewer than ``_SERIAL_VERTICES``).
+        self._serial_contacts = False
+        self._serial_strands = (not on_gpu()) and n < _SERIAL_VERTICES
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
         #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
         self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
@@ -218,6 +226,7 @@ class ContactPipeline:
             self.grow_events += 1
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                         dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH, self._bending_time(dynamic))
+        self._serial_contacts = (not on_gpu()) and total < _SERIAL_CONTACTS
         self.detections += 1
         # Per-step statistics of the continuous passes and the late body contacts of this step.
         self.late_body_contacts = 0
@@ -363,7 +372,7 @@ class ContactPipeline:
         from .projection import projection_begin, projection_end, projection_sweep
 
         projection_begin(x, self.con, False)
-        serial = self._serial()
+        serial = self._serial_contacts
         for _ in range(sweeps):
             projection_sweep(self.con, serial)
         projection_end(x, self.con, buf)
@@ -413,9 +422,7 @@ class ContactPipeline:
         if hold:
             store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
         projection_begin(x, self.con, True)
-        serial = self._serial()
-        # The per-vertex and per-strand loops of the correction on the launching thread too, in a small model.
-        small = (not on_gpu()) and m.vertex_count < _SERIAL_VERTICES
+        serial, small = self._serial_contacts, self._serial_strands
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else 0.25 * self.max_radius
         cap = max(sweeps, cfg.correction_max_iterations)
         rho = cfg.correction_chebyshev_rho
@@ -482,11 +489,6 @@ class ContactPipeline:
                 since = 0
         self.correction_sweeps_last = done
         correction_end(m.vertex, x, self.con)
-
-    def _serial(self) -> bool:
-        """Whether the contact sweeps run their loops on the launching thread: below ``_SERIAL_CONTACTS``
-        contacts, on the CPU (each of a sweep's 16 parallel loops costs a dispatch to the thread pool)."""
-        return (not on_gpu()) and self.contact_count < _SERIAL_CONTACTS
 
     def _restart_correction(self, x, x0, split, frictionless) -> None:
         """Re-linearise every contact at x and restart the correction from it (z = x, r~ = 0)."""

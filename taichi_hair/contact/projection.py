@@ -363,7 +363,7 @@ def projection_sweep(con: ti.template(), serial: ti.template()):
 
     Each step is a top-level loop of the kernel; Taichi runs top-level loops
     one after the other, so the batches stay sequential within one launch.  ``serial``: every loop runs on
-    the launching thread (``ContactPipeline._serial``: where the contacts are few, the 16 dispatches to the
+    the launching thread (``ContactPipeline._serial_contacts``: where the contacts are few, the 16 dispatches to the
     thread pool cost more than the work; the same operations in the same order, so the same bits).
     """
     for batch in ti.static(range(BATCHES)):
