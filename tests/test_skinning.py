@@ -337,3 +337,73 @@ def test_rebinding_after_an_edit_redoes_only_the_changed_strands_and_equals_a_fu
                               full["render_strand_vertex_start"], model2.host["strand_vertex_start"].astype(np.int64),
                               model2.host["strand_vertex_count"].astype(np.int64), full["render_strand_guides"].shape[1],
                               "transport") is None
+
+
+def _binding_numpy(model, guides, strands, K):
+    """The binding's edge, parameter and frame coordinates evaluated in NumPy, float64, vectorised over
+    the vertices (the implementation before the Taichi kernel), as an independent reference."""
+    from taichi_hair.groom.binding import _arc_fractions
+
+    h = model.host
+    X = h["vertex_rest_position"].astype(np.float64)
+    gstart = h["strand_vertex_start"].astype(np.int64)
+    gcount = h["strand_vertex_count"].astype(np.int64)
+    t = h["edge_rest_tangent"].astype(np.float64)
+    d1 = h["edge_rest_director"].astype(np.float64)
+    d2 = np.cross(t, d1)
+    P = np.concatenate(strands).astype(np.float64)
+    counts = np.array([len(p) for p in strands])
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    strand_of = np.repeat(np.arange(len(strands)), counts)
+    nbr = compute_binding(model, guides, strands, K)["render_strand_guides"]
+    f_g, _ = _arc_fractions(X, gcount)
+    s_r, _ = _arc_fractions(P, counts)
+    keys = 2.0 * np.repeat(np.arange(gstart.size), gcount) + f_g
+    g_v = nbr[strand_of]
+    j = np.searchsorted(keys, 2.0 * g_v + s_r[:, None], side="right") - 1
+    j = np.clip(j, gstart[g_v], gstart[g_v] + gcount[g_v] - 2)
+    u = np.clip((s_r[:, None] - f_g[j]) / (f_g[j + 1] - f_g[j]), 0.0, 1.0)
+    guide_of = np.full(len(strands), -1)
+    guide_of[np.asarray(guides)] = np.arange(len(guides))
+    own = guide_of[strand_of] >= 0
+    g_own = guide_of[strand_of[own]]
+    local = np.arange(P.shape[0]) - starts[strand_of]
+    j[own, 0] = gstart[g_own] + np.minimum(local[own], gcount[g_own] - 2)
+    u[own, 0] = np.where(local[own] == gcount[g_own] - 1, 1.0, 0.0)
+    c = np.empty(j.shape + (3,))
+    for k in range(j.shape[1]):
+        d = P - ((1.0 - u[:, k, None]) * X[j[:, k]] + u[:, k, None] * X[j[:, k] + 1])
+        for a, axis in enumerate((t, d1, d2)):
+            c[:, k, a] = np.einsum("ij,ij->i", d, axis[j[:, k]])
+    c[own, 0, 0] = 0.0
+    return j, u, c
+
+
+def test_binding_kernel_equals_a_numpy_evaluation_of_the_arc_length_binding(groom):
+    """The Taichi kernel of the binding (float64, one thread per render strand) against the same formulas in
+    NumPy.  Edge j is the last guide vertex whose arc fraction f_j <= s, the render vertex's, clamped to the
+    guide's edges, and u = clamp((s - f_j) / (f_{j+1} - f_j), 0, 1).  Where s ties a guide vertex's fraction
+    (straight strands of equal vertex counts: s = f = i / (n - 1) up to rounding) the two may round to the two
+    sides of the tie: (j, u = 1) and (j + 1, u = 0), the same point o_j(u) (within 1e-15 m); everywhere else
+    (j, u) are equal bit for bit.  Then c = Q_j^T (p - o_j(u)) within 1e-15 m (coordinates are ~0.1 m, the
+    summation order differs), and every row gives back its rest vertex: o_j(u) + Q_j c = p within 1e-15 m."""
+    strands, guides, model = groom
+    h = model.host
+    X = h["vertex_rest_position"].astype(np.float64)
+    t = h["edge_rest_tangent"].astype(np.float64)
+    d1 = h["edge_rest_director"].astype(np.float64)
+    Q = np.stack([t, d1, np.cross(t, d1)], axis=2)  # columns t, d1, d2
+    P = np.concatenate(strands).astype(np.float64)
+    for k in (1, 4):
+        b = compute_binding(model, guides, strands, k)
+        jk, uk, ck = b["render_vertex_bind_edge"], b["render_vertex_bind_param"], b["render_vertex_bind_local"]
+        j, u, c = _binding_numpy(model, guides, strands, k)
+        tie = (jk != j) | (uk != u)
+        assert tie.mean() < 0.2
+        assert np.all(np.abs(jk - j)[tie] == 1) and np.abs(uk - np.round(uk))[tie].max(initial=0.0) <= 1e-12
+        o_k = (1.0 - uk[..., None]) * X[jk] + uk[..., None] * X[jk + 1]
+        o = (1.0 - u[..., None]) * X[j] + u[..., None] * X[j + 1]
+        assert np.abs(o_k - o).max() <= 1e-15
+        assert np.abs(ck - c)[~tie].max() <= 1e-15
+        back = o_k + np.einsum("vkab,vkb->vka", Q[jk], ck)
+        assert np.abs(back - P[:, None, :]).max() <= 1e-15

@@ -10,7 +10,7 @@ skinning (LBS) of the guides' motion.  Three stages:
    guide-only :class:`Model` is made by :class:`GroomBuilder` with the same
    polylines and materials.
 2. **Binding** (:func:`compute_binding`, in :mod:`taichi_hair.groom.binding`,
-   host NumPy, float64, once): each render strand is bound to its k nearest
+   float64, once per rest shape; its per-vertex part a Taichi kernel): each render strand is bound to its k nearest
    guides by root distance, with normalised inverse-distance weights (a guide
    binds to itself with weight 1).  Along the strand, binding is by normalised
    arc length: a render vertex at arc fraction s follows, on every bound guide,
