@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from dataclasses import replace
+from dataclasses import fields, replace
 
 import numpy as np
 
@@ -28,9 +28,26 @@ def copy_drag(drag: dict | None) -> dict | None:
     return None if drag is None else {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in drag.items()}
 
 
+def frozen(groom):
+    """``groom`` with every array made read-only, in place, and returned.  A session's groom is never written
+    into: every edit makes new arrays (``dataclasses.replace``), so undo snapshots can share the arrays
+    (:func:`shared_copy`), and a write into one raises instead of changing the history behind its back."""
+    for f in fields(groom):
+        v = getattr(groom, f.name)
+        if isinstance(v, np.ndarray):
+            v.flags.writeable = False
+    return groom
+
+
+def shared_copy(groom):
+    """A new Groom holding the same (read-only, :func:`frozen`) arrays and a deep copy of ``params``.  Copying the
+    arrays of an 86,000-strand groom for each undo step cost 0.13 s of an edit (fresh pages after a step)."""
+    return replace(groom, params=json.loads(json.dumps(groom.params)))
+
+
 def snapshot(groom, config, selection: np.ndarray, drag: dict | None, simulating: bool) -> dict:
-    """Everything an undo restores, copied."""
-    return {"groom": groom.copy(), "config": replace(config), "selection": selection.copy(),
+    """Everything an undo restores: the groom's (read-only) arrays shared, the rest copied."""
+    return {"groom": shared_copy(frozen(groom)), "config": replace(config), "selection": selection.copy(),
             "drag": copy_drag(drag), "simulating": simulating}
 
 

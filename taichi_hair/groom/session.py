@@ -105,6 +105,16 @@ class GroomingSession:
         update_count: in-place Model updates so far [-].
     """
 
+    @property
+    def groom(self):
+        """The groom being edited (:class:`taichi_hair.io.Groom`); its arrays are read-only (every edit makes new
+        ones, and undo snapshots share them): copy it (``Groom.copy``) to change it outside the session."""
+        return self._groom
+
+    @groom.setter
+    def groom(self, value) -> None:
+        self._groom = hist.frozen(value)
+
     def __init__(self, groom, config: GroomingConfig | None = None, colliders=None, autosave_path=None):
         self.groom = session_groom(groom)
         self.config = replace(session_config(self.groom, config))
@@ -182,7 +192,7 @@ class GroomingSession:
 
     def _restore(self, snap: dict) -> None:
         old = self.groom, self.config
-        self.groom = snap["groom"].copy()
+        self.groom = hist.shared_copy(snap["groom"])
         self.config = replace(snap["config"])
         self._selection = snap["selection"].copy()
         self._drag = hist.copy_drag(snap["drag"])
