@@ -293,6 +293,27 @@ def test_undo_redo_restore_bit_for_bit():
         s.redo()
 
 
+def test_the_session_groom_is_read_only_so_undo_snapshots_can_share_its_arrays():
+    """Undo snapshots share the groom's arrays instead of copying them (history.shared_copy): that is sound only
+    if nothing writes into them, so they are read-only, and a write raises; an edit makes new arrays and leaves
+    the snapshot's as they were, bit for bit."""
+    s = session()
+    before = s.groom.points.copy()
+    with pytest.raises(ValueError, match="read-only"):
+        s.groom.points[0, 0] = 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        s.groom.rest_points[:] = 0.0
+    shared = s.groom.points
+    s.select_strands([0])
+    s.scale_length(1.3)
+    assert s.groom.points is not shared and not s.groom.points.flags.writeable
+    assert np.array_equal(shared, before)  # the snapshot's arrays, untouched by the edit
+    s.undo()
+    assert np.array_equal(s.groom.points, before)
+    copy = s.groom.copy()  # a copy is the user's to change
+    copy.points[0, 0] = 1.0
+
+
 def test_save_then_load_returns_the_groom_and_its_rest_pose(tmp_path):
     s = session(friction=0.3)
     s.select_strands([3])

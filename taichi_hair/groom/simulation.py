@@ -172,6 +172,7 @@ class GuideSimulation:
         self.solver.refresh_model()
         if self.skin is not None:
             rest = g.rest_points.astype(np.float64)
+            rest.flags.writeable = False  # (ours alone: the binding takes it without another copy)
             off = np.asarray(g.strand_offsets)
             counts = np.diff(off)
             if counts.size and np.all(counts == counts[0]):  # one (strands, vertices, 3) array: no per-strand slices
