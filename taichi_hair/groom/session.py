@@ -92,8 +92,8 @@ class GroomingSession:
             goes beside it as ``<name>.session.json``.  None disables autosave.
 
     Attributes:
-        groom: the edited :class:`Groom` (``points`` current pose, ``rest_points`` rest pose,
-            ``pinned``); replaced, never mutated in place, by edits.
+        groom: the edited :class:`Groom` (``points`` current pose, ``rest_points`` rest pose, ``pinned``);
+            replaced, never mutated in place, by edits: its arrays are read-only (undo snapshots share them).
         config: the current :class:`GroomingConfig`.
         simulating: whether :meth:`advance` steps the solver.
         log: list of ``{"action": name, **params}`` of every action so far.
@@ -105,15 +105,7 @@ class GroomingSession:
         update_count: in-place Model updates so far [-].
     """
 
-    @property
-    def groom(self):
-        """The groom being edited (:class:`taichi_hair.io.Groom`); its arrays are read-only (every edit makes new
-        ones, and undo snapshots share them): copy it (``Groom.copy``) to change it outside the session."""
-        return self._groom
-
-    @groom.setter
-    def groom(self, value) -> None:
-        self._groom = hist.frozen(value)
+    groom = hist.ReadOnlyGroom()  # (see Attributes)
 
     def __init__(self, groom, config: GroomingConfig | None = None, colliders=None, autosave_path=None):
         self.groom = session_groom(groom)
@@ -163,11 +155,6 @@ class GroomingSession:
     def guide_strands(self) -> np.ndarray:
         """Indices of the simulated strands (the others are skinned), int64, sorted."""
         return self._guide_strands()
-
-    @property
-    def _undo(self) -> list:
-        """The undo snapshots (``history.undo_stack``), oldest first."""
-        return self.history.undo_stack
 
     # ------------------------------------------------------------------ log, undo, autosave
     def _record(self, action: str, **params) -> None:

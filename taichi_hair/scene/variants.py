@@ -196,7 +196,7 @@ def _run_variants(session, config: VariantConfig, out_dir, thumb, log):
     for k in range(config.count):
         t0 = time.perf_counter()
         rng = np.random.default_rng([config.seed, k])
-        start_log, start_undo = len(session.log), len(session._undo)
+        start_log, start_undo = len(session.log), len(session.history.undo_stack)
         done = [apply_action(session, str(rng.choice(config.kinds)), rng, config.frames)
                 for _ in range(config.actions)]
         actions = session.log[start_log:]
@@ -207,7 +207,7 @@ def _run_variants(session, config: VariantConfig, out_dir, thumb, log):
         img = thumb(session.groom)
         save_png(os.path.join(out_dir, name + ".png"), img)
         images.append(img)
-        while len(session._undo) > start_undo:  # back to the base groom, bit for bit
+        while len(session.history.undo_stack) > start_undo:  # back to the base groom, bit for bit
             session.undo()
         entry = {"name": name, "actions": done, "seconds": time.perf_counter() - t0}
         variants.append(entry)
