@@ -20,7 +20,7 @@ bound to an edited guide and are bound again); ``--edit region`` the 10 % whose 
 
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
-        [--contacts on|off] [--size 960 720] [--edit spread|region] [--out FILE]
+        [--contacts on|off] [--size 960 720] [--edit spread|region] [--rest-pose authored|sag-free] [--out FILE]
 
 JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>_contacts_<on|off>.json`` by default; a run
 whose simulation diverges writes what it measured and the error (exit code 1).
@@ -49,6 +49,8 @@ def main(argv=None):
     p.add_argument("--schedule", default="auto", choices=["auto", "stage", "strand"],
                    help="the guides' ADMM launch schedule (GroomingConfig.schedule)")
     p.add_argument("--no-draw", action="store_true", help="skip the GGUI drawing (no Vulkan device)")
+    p.add_argument("--rest-pose", choices=["authored", "sag-free"], default="authored",
+                   help="GroomingConfig.rest_pose: sag-free solves the guides' rest pose at the build and after the edit")
     p.add_argument("--edit", choices=["spread", "region"], default="spread",
                    help="which 10 %% of the strands the edit takes: every 10th, or those rooted nearest one root")
     p.add_argument("--out", default=None)
@@ -65,7 +67,7 @@ def main(argv=None):
 
     res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
-           "schedule": args.schedule,
+           "schedule": args.schedule, "rest_pose": args.rest_pose,
            "image": list(args.size), "date": datetime.date.today().isoformat()}
 
     with stopwatch(ti.sync) as sw:
@@ -74,7 +76,8 @@ def main(argv=None):
                                                      vertices_per_strand=args.vertices, length=0.25, seed=0))
     res["generate_s"] = sw.seconds
     cfg = GroomingConfig(iterations=args.iterations, guide_ratio=args.guide_ratio,
-                         contacts=args.contacts == "on", autosave_every=0, schedule=args.schedule)
+                         contacts=args.contacts == "on", autosave_every=0, schedule=args.schedule,
+                         rest_pose=args.rest_pose)
     session = GroomingSession(groom, cfg)
     with stopwatch(ti.sync) as sw:
         session._ensure_built()
