@@ -306,6 +306,40 @@ def test_grooming_session_keeps_a_sag_free_groom_through_an_edit_and_a_new_gravi
     assert reopened.rest_pose_report()["strands_held"] == 8
 
 
+def test_a_sag_free_grooming_edit_solves_only_the_edited_guides_and_equals_a_whole_solve(monkeypatch):
+    """GroomingSession(rest_pose = "sag-free"): a length edit of one of eight guides solves the rest pose of that
+    guide alone (``rest_pose_edit.resolve_rest_pose``: a Model of 1 strand is solved), and the session's rest
+    pose equals a solve of the whole edited guide Model within 1e-9 of the largest moment; a new gravity
+    solves all eight again."""
+    from types import SimpleNamespace
+
+    import taichi_hair.solvers.rest_pose_edit as rpe
+    from taichi_hair.groom.config import GroomingConfig
+    from taichi_hair.groom.session import GroomingSession
+
+    polys = [wavy(0.06, 25, turns=1.0 + 0.2 * k) + [0.01 * k, 0, 0.02 * (k % 2)] for k in range(8)]
+    s = GroomingSession(polys, GroomingConfig(rest_pose="sag-free", guide_ratio=1.0, contacts=False))
+    s.advance(1)
+    solved = []
+    real = rpe.solve_rest_pose
+    monkeypatch.setattr(rpe, "solve_rest_pose", lambda m, *a, **k: solved.append(m.strand_count) or real(m, *a, **k))
+    s.select_strands([3])
+    s.scale_length(1.2)
+    s.advance(1)
+    assert solved == [1]
+    sim = s._sim
+    authored = sim._authored_host
+    whole = solve_rest_pose(SimpleNamespace(host=authored, vertex_count=sim.model.vertex_count,
+                                            strand_count=sim.model.strand_count), sim.solver_config)
+    mine = sim.rest_pose_result.pair_rest_moment
+    assert np.abs(mine - whole.pair_rest_moment).max() <= 1e-9 * np.abs(whole.pair_rest_moment).max()
+    assert sim.rest_pose_result.held_count == 8
+    s.set_parameter("gravity", (0.0, -12.0, 0.0))
+    s.advance(1)
+    assert solved == [1]  # a new gravity: the whole Model again (solve_rest_pose in the session, not here)
+    assert s.rest_pose_report()["residual_max"] < 1e-9
+
+
 def test_soft_material_with_rest_length_correction_gets_a_warning_naming_the_strand():
     """Issue 12 doubt (c): with ContactConfig.correction_lengths='rest' the end-of-step correction would erase the
     stretch of a material that stretches rho g L / E_s > 1e-3 under its weight: a warning names the strand;
@@ -577,3 +611,41 @@ def test_support_from_a_mesh_matches_the_analytic_sphere():
     cos = np.sum(mesh.normal * exact.normal, axis=1)
     assert np.all(cos > np.cos(np.radians(2.0))), cos.min()
     assert np.all(mesh.friction == 0.2)
+
+
+def test_resolving_only_the_edited_strands_equals_a_solve_of_the_whole_edited_groom():
+    """After an edit of two of eight strands (one longer, one curled), ``changed_strands`` names exactly those two,
+    and ``resolve_rest_pose`` (the previous result for the others, the two solved as a Model of their own)
+    equals a full solve of the edited Model: moments within 1e-9 of their largest (the edge loads are a
+    cumulative sum over the flat array, whose rounding depends on the strands that follow), rest lengths
+    within 1e-15 m, the same strands held, and the one strand too heavy to hold reported by its index in
+    the whole groom."""
+    from taichi_hair.solvers.rest_pose_edit import changed_strands, resolve_rest_pose
+
+    def groom(polys):
+        b = GroomBuilder()
+        for p in polys:
+            b.add_strand(p, HAIR)
+        return b.finalize()
+
+    polys = [wavy(0.06, 25, turns=1.0 + 0.2 * k) + [0.01 * k, 0, 0] for k in range(6)]
+    polys += [horizontal(0.05, 21) + [0, 0, 0.02], horizontal(0.30, 41) + [0, 0, 0.04]]  # the last: not held
+    old = groom(polys)
+    first = solve_rest_pose(old, SolverADMMConfig())
+    assert [s for s, _ in first.unheld] == [7]
+    edited = list(polys)
+    edited[2] = edited[2][0] + 1.2 * (edited[2] - edited[2][0])
+    edited[5] = wavy(0.06, 25, amp=0.004, turns=2.0) + [0.05, 0, 0]
+    new = groom(edited)
+    assert changed_strands(old.host, new.host).tolist() == [2, 5]
+    assert changed_strands(old.host, groom(polys[:-1] + [horizontal(0.30, 40)]).host) is None  # another layout
+    full = solve_rest_pose(new, SolverADMMConfig())
+    part = resolve_rest_pose(new, first, [2, 5], SolverADMMConfig())
+    scale = np.abs(full.pair_rest_moment).max()
+    assert scale > 0 and np.abs(part.pair_rest_moment - full.pair_rest_moment).max() <= 1e-9 * scale
+    assert np.abs(part.edge_rest_length - full.edge_rest_length).max() <= 1e-15
+    assert np.allclose(part.strand_rest_turn, full.strand_rest_turn, rtol=1e-9, atol=0.0)
+    assert part.unheld == full.unheld and [s for s, _ in part.unheld] == [7]
+    assert not np.array_equal(part.pair_rest_moment, first.pair_rest_moment)  # the edit shows
+    with pytest.raises(ValueError, match="strands"):
+        resolve_rest_pose(new, first, [8], SolverADMMConfig())

@@ -165,8 +165,9 @@ class GuideSimulation:
         guide_rest, material = guide_setup(g, cfg, guides)
         self.guides = np.asarray(guides)
         host, materials = _host_of(guide_builder(guide_rest, material))
+        before = (self._authored_host, self.rest_pose_result, self._rest_pose_gravity)
         self.model.update(host, materials)
-        self._solve_rest_pose(cfg)
+        self._solve_rest_pose(cfg, before)
         self.apply_live_parameters(cfg)  # (the gravity the rest pose was solved for)
         self.solver.config.w0 = cfg.w0
         self.solver.refresh_model()
@@ -183,16 +184,31 @@ class GuideSimulation:
         self.base_body = host["vertex_body_position"].copy()
         self.stale = False
 
-    def _solve_rest_pose(self, config) -> None:
+    def _solve_rest_pose(self, config, before=None) -> None:
         """With ``config.rest_pose == "sag-free"``: the guides' rest pose solved for the session's gravity
         (:mod:`taichi_hair.solvers.rest_pose`) and written into the Model; the result in
-        ``rest_pose_result`` (None for an authored rest pose).  Call ``refresh_model`` after it."""
+        ``rest_pose_result`` (None for an authored rest pose).  Call ``refresh_model`` after it.
+
+        ``before``: (authored host, result, gravity) of the last solve.  For the same gravity and layout only the
+        guides whose authored host rows changed are solved again (``rest_pose_edit.resolve_rest_pose``; equal to a
+        whole solve to rounding): an edit of 860 of 8,600 guides no longer solves all of them."""
+        from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
+        from ..solvers.rest_pose_edit import changed_strands, resolve_rest_pose
+
+        authored, gravity = self.model.host, tuple(float(v) for v in config.gravity)
+        self._authored_host, self._rest_pose_gravity = authored, gravity
         self.rest_pose_result = None
         if config.rest_pose == "sag-free":
-            from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
-
-            self.rest_pose_result = solve_rest_pose(self.model, self.solver_config, gravity=tuple(config.gravity))
-            apply_rest_pose(self.model, self.rest_pose_result)
+            old_host, old_result, old_gravity = before or (None, None, None)
+            changed = None
+            if old_result is not None and old_gravity == gravity:
+                changed = changed_strands(old_host, authored)
+            if changed is None:
+                result = solve_rest_pose(self.model, self.solver_config, gravity=gravity)
+            else:
+                result = resolve_rest_pose(self.model, old_result, changed, self.solver_config, gravity=gravity)
+            self.rest_pose_result = result
+            apply_rest_pose(self.model, result)
 
     def apply_live_parameters(self, config) -> None:
         """Gravity, iterations and friction of ``config`` into the running solver."""
