@@ -208,6 +208,13 @@ class ContactConfig:
             once; a step that finds more pairs within reach searches in rounds,
             each edge resuming where the full buffer stopped it (the same
             lists; ``contact.pairs``) [-].
+        pair_skin: Verlet skin of the hair-hair pairs [m] where the reach has no
+            velocity part (quasistatic steps, or ``continuous_detections`` > 0): the
+            pairs within reach + skin are kept between steps, and an edge searches
+            again only once a vertex of it moved more than skin / 3 since its last
+            search; the lists hold the pairs of a search every step, their
+            distances to rounding (``contact.pairs.find_candidates_skin``).
+            0: search every step.
         relinearize_correction: re-linearise the contacts at the current
             positions before the geometric correction (closest points and
             normals at x, kept on the begin-of-step side; body distance at x),
@@ -359,6 +366,7 @@ class ContactConfig:
     correction_iterations: int = 10
     capacity_per_vertex: float = 3.0
     pairs_per_edge: float = 8.0
+    pair_skin: float = 0.0
     continuous_detections: int = 0
     mass_splitting: MassSplitting = MassSplitting.BATCH
     relinearize_correction: bool = True
@@ -383,7 +391,7 @@ class ContactConfig:
         if not (isinstance(self.correction_chebyshev_rho, (int, float)) and 0 <= self.correction_chebyshev_rho < 1):
             raise ValueError("ContactConfig.correction_chebyshev_rho must be a number in [0, 1), got "
                              f"{self.correction_chebyshev_rho!r}")
-        for name in ("margin", "velocity_margin", "correction_tolerance"):
+        for name in ("margin", "velocity_margin", "correction_tolerance", "pair_skin"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"ContactConfig.{name} must be a finite number >= 0, got {v!r}")

@@ -397,9 +397,19 @@ class PairFields:
     1,000-strand hairball's pile has ~36 pairs per edge.
     """
 
-    def __init__(self, vertex_count: int, capacity: int):
+    def __init__(self, vertex_count: int, capacity: int, skin: bool = False):
         n = vertex_count
         self.capacity = capacity
+        #: With a skin (``ContactConfig.pair_skin``, ``contact.pairs.find_candidates_skin``): whether the stored pairs
+        #: hold every pair within reach + skin of the edges' anchors (host), per edge whether it searches this
+        #: step [-] and where its two vertices were at its last search [m], shape (vertex_count,) each; the pairs
+        #: of each edge, both sides, for ``edge_pair_start`` [-], shape (2 capacity,).
+        self.skin_valid = False
+        if skin:
+            self.edge_moved = ti.field(ti.i32, n)
+            self.edge_anchor_start = ti.Vector.field(3, float, n)
+            self.edge_anchor_end = ti.Vector.field(3, float, n)
+            self.edge_pair_both_list = ti.field(ti.i32, 2 * capacity)
         #: The two edges of each pair, lower first [-], shape (capacity, 2); their distance [m], shape (capacity,).
         self.pair_edge = ti.Vector.field(2, ti.i32, capacity)
         self.pair_distance = ti.field(float, capacity)

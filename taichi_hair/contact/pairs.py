@@ -51,7 +51,7 @@ def _append_pairs(pairs: ti.template(), a: ti.i32, held_edge, held_distance, hel
 @ti.kernel
 def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), radius: ti.template(),
                grid: ti.template(), boxes: ti.template(), pairs: ti.template(), h: float, margin: float,
-               sweep: float, fall: float):
+               sweep: float, fall: float, skin: ti.template()):
     """One round of the search: every pending edge a (``pairs.edge_pair_resume[a] >= 0``) appends the pairs
     (a, b), a < b, whose distance is below their reach r_a + r_b + margin + sweep (|v_a - v_b| + s_a + s_b) +
     fall, with v the edges' mean velocities, s their spreads, sweep = velocity_margin dt and
@@ -63,13 +63,20 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
     it could not store and stays pending for the next round, which skips the pairs before it: every round
     fills the buffer, so the search ends after ceil(pairs / capacity) rounds, in a buffer of fixed size.
     Edges of one strand that share a vertex, and pairs of kinematic edges (``grid.edges_kinematic``), are
-    skipped."""
-    pairs.pair_count[None] = 0
+    skipped.
+
+    ``skin`` (:func:`find_candidates_skin`): only the edges marked ``pairs.edge_moved`` search, each against every
+    edge except the moved ones below it (those find the pair themselves), appending after the pairs kept in the
+    buffer; the lists are left to :func:`lists_from_pairs`."""
+    if ti.static(not skin):
+        pairs.pair_count[None] = 0
     pairs.pending_count[None] = 0
     t = boxes.table_size
     K = ti.static(grid.candidates_per_edge)
     for a in grid.edge_candidate_count:
         resume = pairs.edge_pair_resume[a]
+        if ti.static(skin):
+            resume = 0 if pairs.edge_moved[a] != 0 else -1
         if resume >= 0:
             own = grid.edge_candidate_count[a]
             stored_upto = resume  # a's pairs, in its search order, stored in this round or an earlier one
@@ -96,7 +103,13 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                     bkt = bucket_of(cell, t)
                     for e in range(boxes.bucket_start[bkt], boxes.bucket_start[bkt + 1]):
                         b = boxes.entry_edge[e]
-                        if full or b <= a:
+                        if ti.static(skin):
+                            if full or b == a:
+                                continue
+                            if b < a:
+                                if pairs.edge_moved[b] != 0:
+                                    continue  # a moved lower edge finds the pair itself
+                        elif full or b <= a:
                             continue  # a branch of its own: Taichi's ``and`` evaluates both sides (no short circuit)
                         if entry_pair_here(boxes, e, lo, box_lo_a, box_hi_a, cell, h):
                             if not edges_adjacent(vertex, a, b, sa):
@@ -107,7 +120,8 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                                     if dist < reach:
                                         if edges_kinematic(vertex, a, b):
                                             continue
-                                        own = insert_candidate(grid, a, b, dist, own, K)  # a's side, in a's own row
+                                        if ti.static(not skin):
+                                            own = insert_candidate(grid, a, b, dist, own, K)  # a's side, in a's row
                                         if found >= resume:  # not stored by an earlier round
                                             held_edge[held] = b
                                             held_distance[held] = dist
@@ -127,7 +141,8 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                 pairs.edge_pair_resume[a] = stored_upto
             else:
                 pairs.edge_pair_resume[a] = -1
-            grid.edge_candidate_count[a] = own
+            if ti.static(not skin):
+                grid.edge_candidate_count[a] = own
 
 
 @ti.kernel
@@ -170,8 +185,127 @@ def find_candidates(vertex, edge, x, radius, grid, boxes, pairs: PairFields, h: 
     pairs.edge_pair_resume.fill(0)
     rounds = 0
     while True:
-        find_pairs(vertex, edge, x, radius, grid, boxes, pairs, h, margin, sweep, fall)
+        find_pairs(vertex, edge, x, radius, grid, boxes, pairs, h, margin, sweep, fall, False)
         gather_candidates(grid, pairs)
         rounds += 1
         if int(pairs.pending_count[None]) == 0:
             return rounds
+
+
+# --------------------------------------------------------------------------- a Verlet skin (ContactConfig.pair_skin)
+@ti.kernel
+def mark_moved_edges(edge: ti.template(), x: ti.template(), pairs: ti.template(), tau: float, valid: ti.i32) -> ti.i32:
+    """``pairs.edge_moved[a]`` = 1 for every edge a with a vertex farther than ``tau`` [m] from where it was at the
+    edge's last search (every edge when ``valid`` is 0); returns how many."""
+    moved = 0
+    for a in pairs.edge_moved:
+        m = 0
+        if edge.edge_rest_length[a] > 0.0:
+            if valid == 0:
+                m = 1
+            elif (x[a] - pairs.edge_anchor_start[a]).norm() > tau or (x[a + 1] - pairs.edge_anchor_end[a]).norm() > tau:
+                m = 1
+        pairs.edge_moved[a] = m
+        moved += m
+    return moved
+
+
+@ti.kernel
+def keep_unmoved_pairs(pairs: ti.template(), valid: ti.i32):
+    """Drop the stored pairs with a moved edge (they are searched again), the others kept in their order;
+    all of them when ``valid`` is 0."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        kept = 0
+        if valid != 0:
+            for p in range(ti.min(pairs.pair_count[None], pairs.capacity)):
+                e = pairs.pair_edge[p]
+                if pairs.edge_moved[e[0]] == 0 and pairs.edge_moved[e[1]] == 0:
+                    pairs.pair_edge[kept] = e
+                    kept += 1
+        pairs.pair_count[None] = kept
+
+
+@ti.kernel
+def anchor_moved_edges(x: ti.template(), pairs: ti.template()):
+    """The moved edges searched at x: their anchors are their vertices now."""
+    for a in pairs.edge_moved:
+        if pairs.edge_moved[a] != 0:
+            pairs.edge_anchor_start[a] = x[a]
+            pairs.edge_anchor_end[a] = x[a + 1]
+
+
+@ti.func
+def _within(radius: ti.template(), pairs: ti.template(), p: ti.i32, margin: float) -> bool:
+    """Is stored pair p within the reach of the search without skin, r_a + r_b + margin (the expression of
+    ``find_pairs`` with sweep = fall = 0: adding the zeros changes no bit)?"""
+    e = pairs.pair_edge[p]
+    return pairs.pair_distance[p] < radius[e[0]] + radius[e[1]] + margin
+
+
+@ti.kernel
+def lists_from_pairs(x: ti.template(), radius: ti.template(), grid: ti.template(), pairs: ti.template(),
+                     margin: float):
+    """Every edge's ``candidates_per_edge`` closest pairs within reach, from the stored pairs (a superset of them):
+    each pair's distance at x (``segment_closest_points`` of the lower edge then the higher, as ``find_pairs``),
+    then a CSR of the pairs within reach by edge, both sides, and the sorted insertion: the lists of a search
+    without skin (the same set; the same distances to rounding: the segment test is compiled into this kernel,
+    and with fast math it rounds differently from ``find_pairs``, 1 ulp of float32 on a few pairs measured)."""
+    K = ti.static(grid.candidates_per_edge)
+    n = grid.edge_candidate_count.shape[0]
+    count = ti.min(pairs.pair_count[None], pairs.capacity)
+    for p in range(count):
+        e = pairs.pair_edge[p]
+        s, u, dist = segment_closest_points(x[e[0]], x[e[0] + 1], x[e[1]], x[e[1] + 1])
+        pairs.pair_distance[p] = dist
+    for i in range(n + 1):
+        pairs.edge_pair_start[i] = 0
+    for p in range(count):
+        if _within(radius, pairs, p, margin):
+            e = pairs.pair_edge[p]
+            ti.atomic_add(pairs.edge_pair_start[e[0]], 1)
+            ti.atomic_add(pairs.edge_pair_start[e[1]], 1)
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        exclusive_scan(pairs.edge_pair_start, n)
+    for i in range(n):
+        pairs.edge_pair_fill[i] = 0
+    for p in range(count):
+        if _within(radius, pairs, p, margin):
+            e = pairs.pair_edge[p]
+            for side in ti.static(range(2)):
+                a = e[side]
+                pairs.edge_pair_both_list[pairs.edge_pair_start[a] + ti.atomic_add(pairs.edge_pair_fill[a], 1)] = p
+    for a in range(n):
+        c = 0
+        for j in range(pairs.edge_pair_start[a], pairs.edge_pair_start[a + 1]):
+            p = pairs.edge_pair_both_list[j]
+            e = pairs.pair_edge[p]
+            c = insert_candidate(grid, a, e[0] + e[1] - a, pairs.pair_distance[p], c, K)
+        grid.edge_candidate_count[a] = c
+
+
+def find_candidates_skin(vertex, edge, x, radius, grid, boxes, pairs: PairFields, margin: float, skin: float,
+                         fill_grid) -> int:
+    """The lists of :func:`find_candidates` (reach r_a + r_b + margin, no velocity part) from pairs kept between
+    steps (a Verlet list): the buffer holds every pair within reach + ``skin`` of the edges where they were at
+    their last search, and an edge searches again (``fill_grid()`` first fills the grid, with boxes grown by the
+    skin, and returns its cell size) only once a vertex of it moved more than skin / 3 since.  Why a third: a
+    pair not stored was at least reach + skin apart when the later of its edges searched; since then that edge
+    moved at most skin / 3 and the other at most 2 skin / 3 (up to skin / 3 from its own anchor, which that search
+    was at most skin / 3 from), and a segment distance changes by at most the endpoints' largest displacements.
+    Returns how many edges searched, or -1 when the pairs within reach + skin do not fit the buffer (nothing is
+    kept then: the caller searches without skin)."""
+    valid = int(pairs.skin_valid)
+    moved = int(mark_moved_edges(edge, x, pairs, skin / 3.0, valid))
+    if moved > 0:
+        keep_unmoved_pairs(pairs, valid)
+        h = fill_grid()
+        find_pairs(vertex, edge, x, radius, grid, boxes, pairs, h, margin + skin, 0.0, 0.0, True)
+        if int(pairs.pending_count[None]) > 0:
+            pairs.skin_valid = False
+            return -1
+        anchor_moved_edges(x, pairs)
+        pairs.skin_valid = True
+    lists_from_pairs(x, radius, grid, pairs, margin)
+    return moved

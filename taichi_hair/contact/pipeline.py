@@ -13,6 +13,7 @@ from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts,
                      write_contacts)
+from .projection import warn_soft_rest_lengths
 
 #: Edge-length passes that end the length-holding correction (``ContactPipeline.correct``), before each
 #: depth check.  8, not 4: measured (24 frames of assets/scenes/head_turn.toml) strain p99 / max 0.042 / 0.29 %
@@ -52,7 +53,7 @@ class ContactPipeline:
         self.model = model
         self.config = config
         self.colliders = colliders if colliders is not None else ColliderSet([], model.body_count)
-        _warn_soft_rest_lengths(model, config)
+        warn_soft_rest_lengths(model, config)
         if config.hair_hair:
             from .grid import warn_overlapping_root_edges
 
@@ -73,7 +74,9 @@ class ContactPipeline:
         self.grid = GridFields(n, config.max_contacts_per_edge)
         #: Hair-hair pairs within reach, each found once (``pairs.find_candidates``): a buffer of fixed size, the
         #: search runs in rounds when a step finds more pairs than it holds.
-        self.pairs = PairFields(n, max(256, int(config.pairs_per_edge * n)))
+        self.pairs = PairFields(n, max(256, int(config.pairs_per_edge * n)), skin=config.pair_skin > 0)
+        #: Edges that searched in the last detection with a skin (-1: no skin, or the search without it ran).
+        self.pair_skin_searched = -1
         #: Rounds of the last hair-hair search, and rounds past the first since the pipeline was made.
         self.pair_rounds_last = 0
         self.pair_extra_rounds = 0
@@ -124,6 +127,9 @@ class ContactPipeline:
         """(Re)compute the per-vertex contact coefficients from the Model (after an in-place Model update)."""
         import numpy as np
 
+        if hasattr(self, "pairs"):
+            self.pairs.skin_valid = False  # radii and edges may have changed: the kept pairs are searched again
+
         from ..model import _np_float
 
         model = self.model
@@ -162,7 +168,7 @@ class ContactPipeline:
 
         from ..fields import ContactFields
         from .grid import compute_edge_bounds, proximity_boxes, rigid_velocity_fit, strand_velocity_moments
-        from .pairs import find_candidates
+        from .pairs import find_candidates, find_candidates_skin
 
         m, cfg, g = self.model, self.config, self.grid
         x, v = state.vertex_position, state.vertex_velocity
@@ -197,7 +203,16 @@ class ContactPipeline:
             fall *= max_edge / motion
             motion = max_edge
         self.hair_search_skipped = False
-        if cfg.hair_hair:
+        # A Verlet skin (``pair_skin``, ``pairs.find_candidates_skin``) where the reach has no velocity part.
+        skin = cfg.pair_skin if cfg.hair_hair and sweep == 0.0 and fall == 0.0 else 0.0
+        self.pairs.skin_valid, self.pair_skin_searched = self.pairs.skin_valid and skin > 0.0, -1
+        if skin > 0.0:
+            self.pair_skin_searched = find_candidates_skin(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes,
+                                                           self.pairs, margin, skin, lambda: (proximity_boxes(
+                                                               m.edge, x, self.vertex_radius, g, self.boxes,
+                                                               margin + skin, 0.0, 0.0),
+                                                               self._fill_box_grid(max(max_edge, 1e-9)))[1])
+        if cfg.hair_hair and self.pair_skin_searched < 0:
             proximity_boxes(m.edge, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
             if cfg.skip_when_apart and self._strands_apart(x, margin, sweep, fall):
                 # No two strands within reach and none can touch itself: nothing to search (grid.strands_apart).
@@ -209,7 +224,7 @@ class ContactPipeline:
                 self.pair_rounds_last = find_candidates(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes,
                                                         self.pairs, h, margin, sweep, fall)
                 self.pair_extra_rounds += self.pair_rounds_last - 1
-        else:
+        elif not cfg.hair_hair:
             g.edge_candidate_count.fill(0)
         sweep, fall = body_sweep, body_fall
         while True:
@@ -565,33 +580,3 @@ class ContactPipeline:
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
                 "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped,
                 "late_body_contacts": self.late_body_contacts, "rest_overlap_contacts": kept}
-
-
-#: The end-of-step correction's "rest" lengths take the rest length for the length: warn when a material
-#: stretches more than this under its own weight (the root strain rho g L / E_s of a hanging strand) [-].
-SOFT_STRETCH_WARNING = 1.0e-3
-
-
-def _warn_soft_rest_lengths(model, config) -> None:
-    """A warning naming the softest strand when ``correction_lengths="rest"`` would erase a real stretch."""
-    if config.correction_lengths != CorrectionLengths.REST:
-        return
-    h = model.host
-    le = np.asarray(h["edge_rest_length"], np.float64)
-    real = le > 0
-    strand = h["vertex_strand"]
-    ns = model.strand_count
-    area = np.asarray(h["strand_area"], np.float64)[strand]
-    e_s = np.zeros_like(le)
-    e_s[real] = np.asarray(h["edge_stretch_stiffness"], np.float64)[real] / (area[real] * le[real])
-    length = np.bincount(strand, weights=le, minlength=ns)
-    e_min = np.full(ns, np.inf)
-    np.minimum.at(e_min, strand[real], e_s[real])
-    strain = np.asarray(h["strand_density"], np.float64) * 9.81 * length / e_min
-    s = int(np.argmax(strain))
-    if strain[s] > SOFT_STRETCH_WARNING:
-        import warnings
-
-        warnings.warn(f"strand {s} stretches by {100 * strain[s]:.2g} % under its own weight (rho g L / E_s), but "
-                      "ContactConfig.correction_lengths='rest' holds every edge at its rest length after contacts: "
-                      "use correction_lengths='before' to keep a soft material's stretch", stacklevel=3)

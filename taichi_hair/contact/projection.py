@@ -30,8 +30,10 @@ C_mu: r~ in the friction cone, u_N >= 0, r~_N u_N = 0, and either u_T = 0
 * slide: r~ = -w_N n - mu (-w_N) w_T/|w_T|, u = w_T (1 - mu (-w_N)/|w_T|).
 """
 
+import numpy as np
 import taichi as ti
 
+from ..config import CorrectionLengths
 from ..fields import CONTACT_BATCHES
 from .colliders import body_transform, collider_distance
 
@@ -426,3 +428,33 @@ def chebyshev_step(vertex: ti.template(), con: ti.template(), prev: ti.template(
             prev[i] = cur[i]
             cur[i] = zn
             con.vertex_z[i] = zn
+
+
+#: The end-of-step correction's "rest" lengths take the rest length for the length: warn when a material
+#: stretches more than this under its own weight (the root strain rho g L / E_s of a hanging strand) [-].
+SOFT_STRETCH_WARNING = 1.0e-3
+
+
+def warn_soft_rest_lengths(model, config) -> None:
+    """A warning naming the softest strand when ``correction_lengths="rest"`` would erase a real stretch."""
+    if config.correction_lengths != CorrectionLengths.REST:
+        return
+    h = model.host
+    le = np.asarray(h["edge_rest_length"], np.float64)
+    real = le > 0
+    strand = h["vertex_strand"]
+    ns = model.strand_count
+    area = np.asarray(h["strand_area"], np.float64)[strand]
+    e_s = np.zeros_like(le)
+    e_s[real] = np.asarray(h["edge_stretch_stiffness"], np.float64)[real] / (area[real] * le[real])
+    length = np.bincount(strand, weights=le, minlength=ns)
+    e_min = np.full(ns, np.inf)
+    np.minimum.at(e_min, strand[real], e_s[real])
+    strain = np.asarray(h["strand_density"], np.float64) * 9.81 * length / e_min
+    s = int(np.argmax(strain))
+    if strain[s] > SOFT_STRETCH_WARNING:
+        import warnings
+
+        warnings.warn(f"strand {s} stretches by {100 * strain[s]:.2g} % under its own weight (rho g L / E_s), but "
+                      "ContactConfig.correction_lengths='rest' holds every edge at its rest length after contacts: "
+                      "use correction_lengths='before' to keep a soft material's stretch", stacklevel=3)
