@@ -205,6 +205,33 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
     assert pipes[1].pair_skin_searched == -1
 
 
+def test_a_skin_whose_pairs_overflow_the_buffer_is_given_up_with_a_warning_and_nothing_is_lost():
+    """A skin of 5 mm on the random groom (a 12 mm box) keeps thousands of pairs, more than a 256-pair buffer: the
+    detection warns once, searches without the skin (the lists of a pipeline without one, bit for bit: the same
+    kernel), and the next detections do not try the skin again."""
+    import warnings
+
+    from taichi_hair.contact.pipeline import ContactPipeline
+
+    model, _ = _random_groom(7)
+    st = model.state()
+    pipes = [ContactPipeline(model, ContactConfig(margin=2e-4, pairs_per_edge=0.5, pair_skin=k)) for k in (5e-3, 0.0)]
+    for p in pipes:
+        p.colliders.begin_step(model.control())
+    assert pipes[0].pairs.capacity == 256
+    with pytest.warns(UserWarning, match="pair_skin = 0.005 m: the pairs within reach \\+ skin do not fit"):
+        pipes[0].detect(st, 1.0, (0, -9.81, 0), False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pipes[0].detect(st, 1.0, (0, -9.81, 0), False)
+    assert pipes[0].pair_skin_searched == -1
+    pipes[1].detect(st, 1.0, (0, -9.81, 0), False)
+    for a, b in zip((pipes[0].grid.edge_candidate_count, pipes[0].grid.edge_candidate),
+                    (pipes[1].grid.edge_candidate_count, pipes[1].grid.edge_candidate)):
+        assert np.array_equal(a.to_numpy(), b.to_numpy())
+    assert pipes[1].grid.edge_candidate_count.to_numpy().sum() > 100
+
+
 def _detected_pairs(pipe, st, dt):
     total = pipe.detect(st, dt, (0, -9.81, 0), True)
     vtx = pipe.con.contact_vertex.to_numpy()[:total]

@@ -285,12 +285,13 @@ def lists_from_pairs(x: ti.template(), radius: ti.template(), grid: ti.template(
         grid.edge_candidate_count[a] = c
 
 
-def find_candidates_skin(vertex, edge, x, radius, grid, boxes, pairs: PairFields, margin: float, skin: float,
+def find_candidates_skin(vertex, edge, x, radius, grid, pairs: PairFields, margin: float, skin: float,
                          fill_grid) -> int:
     """The lists of :func:`find_candidates` (reach r_a + r_b + margin, no velocity part) from pairs kept between
     steps (a Verlet list): the buffer holds every pair within reach + ``skin`` of the edges where they were at
     their last search, and an edge searches again (``fill_grid()`` first fills the grid, with boxes grown by the
-    skin, and returns its cell size) only once a vertex of it moved more than skin / 3 since.  Why a third: a
+    skin, and returns its cell size and the box grid, which it may have grown) only once a vertex of it moved
+    more than skin / 3 since.  Why a third: a
     pair not stored was at least reach + skin apart when the later of its edges searched; since then that edge
     moved at most skin / 3 and the other at most 2 skin / 3 (up to skin / 3 from its own anchor, which that search
     was at most skin / 3 from), and a segment distance changes by at most the endpoints' largest displacements.
@@ -300,7 +301,7 @@ def find_candidates_skin(vertex, edge, x, radius, grid, boxes, pairs: PairFields
     moved = int(mark_moved_edges(edge, x, pairs, skin / 3.0, valid))
     if moved > 0:
         keep_unmoved_pairs(pairs, valid)
-        h = fill_grid()
+        h, boxes = fill_grid()
         find_pairs(vertex, edge, x, radius, grid, boxes, pairs, h, margin + skin, 0.0, 0.0, True)
         if int(pairs.pending_count[None]) > 0:
             pairs.skin_valid = False

@@ -75,8 +75,9 @@ class ContactPipeline:
         #: Hair-hair pairs within reach, each found once (``pairs.find_candidates``): a buffer of fixed size, the
         #: search runs in rounds when a step finds more pairs than it holds.
         self.pairs = PairFields(n, max(256, int(config.pairs_per_edge * n)), skin=config.pair_skin > 0)
-        #: Edges that searched in the last detection with a skin (-1: no skin, or the search without it ran).
-        self.pair_skin_searched = -1
+        #: Edges that searched in the last detection with a skin (-1: no skin, or the search without it ran);
+        #: whether the skin was given up (its pairs did not fit the buffer).
+        self.pair_skin_searched, self._skin_off = -1, False
         #: Rounds of the last hair-hair search, and rounds past the first since the pipeline was made.
         self.pair_rounds_last = 0
         self.pair_extra_rounds = 0
@@ -204,14 +205,19 @@ class ContactPipeline:
             motion = max_edge
         self.hair_search_skipped = False
         # A Verlet skin (``pair_skin``, ``pairs.find_candidates_skin``) where the reach has no velocity part.
-        skin = cfg.pair_skin if cfg.hair_hair and sweep == 0.0 and fall == 0.0 else 0.0
+        skin = cfg.pair_skin if cfg.hair_hair and sweep == 0.0 and fall == 0.0 and not self._skin_off else 0.0
         self.pairs.skin_valid, self.pair_skin_searched = self.pairs.skin_valid and skin > 0.0, -1
         if skin > 0.0:
-            self.pair_skin_searched = find_candidates_skin(m.vertex, m.edge, x, self.vertex_radius, g, self.boxes,
-                                                           self.pairs, margin, skin, lambda: (proximity_boxes(
+            self.pair_skin_searched = find_candidates_skin(m.vertex, m.edge, x, self.vertex_radius, g, self.pairs,
+                                                           margin, skin, lambda: (proximity_boxes(
                                                                m.edge, x, self.vertex_radius, g, self.boxes,
                                                                margin + skin, 0.0, 0.0),
-                                                               self._fill_box_grid(max(max_edge, 1e-9)))[1])
+                                                               self._fill_box_grid(max(max_edge, 1e-9)), self.boxes)[1:])
+            if self.pair_skin_searched < 0:  # (a failed try costs a search: not again for this pipeline)
+                self._skin_off = True
+                warnings.warn(f"ContactConfig.pair_skin = {skin:g} m: the pairs within reach + skin do not fit the "
+                              f"pair buffer ({self.pairs.capacity} pairs, pairs_per_edge); searching every step "
+                              "without a skin from now on", stacklevel=3)
         if cfg.hair_hair and self.pair_skin_searched < 0:
             proximity_boxes(m.edge, x, self.vertex_radius, g, self.boxes, margin, sweep, fall)
             if cfg.skip_when_apart and self._strands_apart(x, margin, sweep, fall):

@@ -31,6 +31,13 @@ import numpy as np
 
 from .config import COMB_BODY
 
+#: The hair-hair pairs of a grooming session are kept between frames with a Verlet skin of this many contact
+#: margins (``ContactConfig.pair_skin``; quasistatic steps have no velocity reach).  Measured on the grooming
+#: benchmark's 8,600 sag-free guides (frames 2-7, ``/tmp/p/groom_skin.py``): skin 0 (a search every frame)
+#: 2,248 ms per frame, 3 margins 2,097, 5 margins 1,969 (27-50 % of the edges search), 8 margins more pairs
+#: than the buffer holds (the skin is then given up, with a warning).
+PAIR_SKIN_MARGINS = 5.0
+
 
 def _host_of(builder) -> tuple[dict, list]:
     """``(host, materials)`` that ``builder.finalize()`` would give its Model, without allocating
@@ -130,7 +137,7 @@ class GuideSimulation:
         # Proximity only (Sec. 5.3): no velocity-dependent margin growth.  The pipeline always exists:
         # it holds the comb, an idle collider on its own body until a stroke enables it.
         contacts = ContactConfig(hair_hair=cfg.contacts, friction=cfg.friction, margin=cfg.contact_margin,
-                                 velocity_margin=0.0)
+                                 velocity_margin=0.0, pair_skin=PAIR_SKIN_MARGINS * cfg.contact_margin)
         comb = CapsuleCollider(p0=(0.0, 0.0, 0.0), p1=(0.0, 0.0, 0.0), radius=1.0e-3, friction=0.0, body=COMB_BODY,
                                strands=(0, 1))
         solver = SolverADMM(model, replace(self.solver_config, contacts=contacts), colliders=list(colliders) + [comb])
