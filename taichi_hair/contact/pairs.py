@@ -145,6 +145,14 @@ def find_pairs(vertex: ti.template(), edge: ti.template(), x: ti.template(), rad
                 grid.edge_candidate_count[a] = own
 
 
+@ti.func
+def _csr_starts(pairs: ti.template(), n: ti.i32):
+    """The counts in ``edge_pair_start`` made starts (exclusive scan) and the fill cursors cleared (serial)."""
+    exclusive_scan(pairs.edge_pair_start, n)
+    for i in range(n):
+        pairs.edge_pair_fill[i] = 0
+
+
 @ti.kernel
 def gather_candidates(grid: ti.template(), pairs: ti.template()):
     """Per edge, the ``candidates_per_edge`` closest of the pairs it is in, sorted by (distance, other edge),
@@ -162,9 +170,7 @@ def gather_candidates(grid: ti.template(), pairs: ti.template()):
         ti.atomic_add(pairs.edge_pair_start[pairs.pair_edge[p][1]], 1)
     ti.loop_config(serialize=True)
     for _ in range(1):
-        exclusive_scan(pairs.edge_pair_start, n)
-    for i in range(n):
-        pairs.edge_pair_fill[i] = 0
+        _csr_starts(pairs, n)
     for p in range(count):
         b = pairs.pair_edge[p][1]
         pairs.edge_pair_list[pairs.edge_pair_start[b] + ti.atomic_add(pairs.edge_pair_fill[b], 1)] = p
@@ -267,9 +273,7 @@ def lists_from_pairs(x: ti.template(), radius: ti.template(), grid: ti.template(
             ti.atomic_add(pairs.edge_pair_start[e[1]], 1)
     ti.loop_config(serialize=True)
     for _ in range(1):
-        exclusive_scan(pairs.edge_pair_start, n)
-    for i in range(n):
-        pairs.edge_pair_fill[i] = 0
+        _csr_starts(pairs, n)
     for p in range(count):
         if _within(radius, pairs, p, margin):
             e = pairs.pair_edge[p]
