@@ -177,14 +177,16 @@ def _flat_polylines(strands, name: str) -> tuple[np.ndarray, np.ndarray]:
     if short.size:
         i = int(short[0])
         raise ValueError(f"{name}[{i}] has {counts[i]} vertices; a strand needs at least 2")
-    strand_of = np.repeat(np.arange(counts.size), counts)
-    bad = np.where(~np.all(np.isfinite(flat), axis=1))[0]
+    starts = np.cumsum(counts) - counts  # (the strand of a bad row by a search: no per-vertex strand index)
+    bad = np.flatnonzero(~np.all(np.isfinite(flat), axis=1))
     if bad.size:
-        raise ValueError(f"{name}[{int(strand_of[bad[0]])}] has a non-finite coordinate")
-    same = strand_of[1:] == strand_of[:-1]
-    zero = np.where(same & np.all(flat[1:] == flat[:-1], axis=1))[0]
+        raise ValueError(f"{name}[{int(np.searchsorted(starts, bad[0], 'right')) - 1}] has a non-finite coordinate")
+    repeated = np.all(flat[1:] == flat[:-1], axis=1)
+    repeated[starts[1:] - 1] = False  # (a strand's last vertex and the next strand's root)
+    zero = np.flatnonzero(repeated)
     if zero.size:
-        raise ValueError(f"{name}[{int(strand_of[zero[0]])}] has a zero-length edge (repeated point)")
+        raise ValueError(f"{name}[{int(np.searchsorted(starts, zero[0], 'right')) - 1}] has a zero-length edge "
+                         "(repeated point)")
     return flat, counts
 
 
