@@ -199,7 +199,7 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
             assert set(e0[a, :k]) == set(e1[a, :k]), (step, a)
             assert np.allclose(d0[a, :k], d1[a, :k], rtol=0.0, atol=1e-8), (step, a)
         assert c0.sum() > 100
-        searched.append(pipes[0].pair_skin_searched)
+        searched.append(pipes[0].statistics(st.vertex_position)["pair_skin_edges_searched"])
     assert searched[0] == edges and searched[8] == edges, searched
     assert searched[5] == 0 and sum(0 < k < edges // 2 for k in searched) >= 8, searched
     assert pipes[1].pair_skin_searched == -1

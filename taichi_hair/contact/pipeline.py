@@ -557,6 +557,8 @@ class ContactPipeline:
         ``body_penetration_max_m`` is against the solver's collider distance (a mesh's voxel SDF).
         A hair pair is measured past its contact thickness: r_a + r_b, or its rest distance where the pair
         was closer at rest (``ContactConfig.keep_rest_overlaps``); ``rest_overlap_contacts`` counts those.
+        ``pair_skin_edges_searched``: edges that searched for pairs in the last detection with ``pair_skin``
+        (-1 without a skin).
         """
         import numpy as np
 
@@ -585,4 +587,5 @@ class ContactPipeline:
                 "correction_sweeps": self.correction_sweeps_last,
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
                 "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped,
-                "late_body_contacts": self.late_body_contacts, "rest_overlap_contacts": kept}
+                "late_body_contacts": self.late_body_contacts, "rest_overlap_contacts": kept,
+                "pair_skin_edges_searched": self.pair_skin_searched}
