@@ -121,7 +121,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     else:
         t, d1, d2 = (np.asarray(a, dtype=np.float64) for a in guide_rest_frames)
     f_g, _ = _arc_fractions(X, gcount)
-    geometry = (X, gstart, gcount, f_g, t, d1, d2, guide_of_strand, is_guide)
+    geometry = (X, gstart, gcount, f_g, t, d1, d2, guide_of_strand)
 
     redo = _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame)
     if redo is not None:
@@ -209,7 +209,7 @@ def _bind_vertices(P, first, counts, strand_ids, nbr, geometry, j, u, local_c) -
     (V, K, 3), float64, C-contiguous) of the vertices of the render strands ``strand_ids``, whose rows in ``P``
     (V, 3) start at ``first`` and number ``counts``; the other rows are left as they are.  Each vertex
     independently of the others: the kernel :func:`_bind_kernel`, float64, in parallel over the strands."""
-    X, gstart, gcount, f_g, t, d1, d2, guide_of_strand, _ = geometry
+    X, gstart, gcount, f_g, t, d1, d2, guide_of_strand = geometry
     if counts.size:
         f64, i64 = np.float64, np.int64
         _bind_kernel(np.ascontiguousarray(P, f64), np.ascontiguousarray(first, i64), np.ascontiguousarray(counts, i64),
