@@ -248,22 +248,38 @@ SPLIT_NONE = 2
 BEND_NONE, BEND_ALL, BEND_BODY = 0, 1, 2
 
 
+#: Where a contact touches a clamped vertex, D_hat_c = max(D_free, CLAMPED_DELASSUS_FLOOR * D_all): see ``_delassus``.
+CLAMPED_DELASSUS_FLOOR = 0.25
+
+
 @ti.func
 def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> float:
-    """Mass-split Delassus diagonal D_hat_c = sum_i n_i h_ci^2 / W_z,i of contact c (Sec. 4.5).
+    """Mass-split Delassus diagonal D_hat_c of contact c (Sec. 4.5): D_hat_c = sum_i n_i h_ci^2 / W_z,i.
 
     ``split_by_batch``: True (n_i = c's batch's contacts on i), False (n_i = all of i's contacts), or
     ``SPLIT_NONE`` (n_i = 1: the plain Delassus diagonal D of Eq. 6, no splitting; the correction's option
     ``ContactConfig.correction_mass_splitting = "none"``).
 
-    Clamped vertices enter with the W_z a free vertex would have, although they do not move.  With the
-    paper's 1/W_z = 0 for them, a contact whose point lies near a clamped vertex (weight h ~ 1 there and
-    h ~ 0.01 on the free one) gets a tiny D_hat, and the z-step moves the free vertex by Delta u / h, a
-    lever amplified a hundredfold: measured, 8,600 clamped strands generated on a head (roots 2.5 mm apart,
-    103k contacts at rest) moved by 56 mm then 1 m in two quasistatic iterations and diverged.  Counting
-    the clamped vertex only under-relaxes such contacts (what cannot move is not asked to).
+    Clamped vertices do not move (1/W_z = 0).  Summed over the free vertices alone (D_free, the paper's
+    D_hat), a contact whose point lies near a clamped vertex (h ~ 1 there, h ~ 0.01 on the free one) gets a
+    tiny D_hat, and a projection moves the free vertex by Delta u h / (W D_hat) ~ Delta u / h, a lever
+    amplified a hundredfold: measured, 8,600 clamped strands generated on a head (roots 2.5 mm apart, 103k
+    contacts at rest) moved by 56 mm then 1 m in two quasistatic iterations and diverged.  Counting the
+    clamped vertices with the weight a free vertex would have (D_all) bounds the lever but under-relaxes
+    every contact with a clamped vertex, also those the free vertices could resolve alone: a free edge
+    lying against a neighbour's clamped root edge closed about half its gap per projection, and the head
+    turn's end-of-step correction needed 100-200 sweeps (measured, ``assets/scenes/head_turn.toml``).
+
+    So D_hat_c = max(D_free, kappa D_all) with kappa = ``CLAMPED_DELASSUS_FLOOR`` = 1/4: the paper's value
+    wherever the free vertices carry at least a quarter of D_all (a free edge against a clamped one: D_free
+    >= D_all / 2 when both vertices of the free edge are free), the bounded one where they carry less.  The
+    bound, in closed form (equal weights W, one copy): a free vertex moves by Delta u h_i / (W D_hat)
+    <= Delta u min(h_i / (kappa W D_all), 1 / h_i) <= Delta u / sqrt(kappa) = 2 Delta u, since D_hat >= D_free
+    >= h_i^2 / W and W D_all >= 1 for two segments.  Contacts without a clamped vertex have D_free = D_all:
+    unchanged.
     """
     dh = 0.0
+    dfree = 0.0
     for k in ti.static(range(4)):
         v = con.contact_vertex[c][k]
         if v >= 0:
@@ -279,7 +295,8 @@ def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> f
                     if con.vertex_contact_list[e] % BATCHES == c % BATCHES:
                         copies += 1
             dh += copies * h * h * con.vertex_delassus_inv_weight[v]
-    return dh
+            dfree += copies * h * h * con.vertex_contact_inv_weight[v]
+    return ti.max(dfree, CLAMPED_DELASSUS_FLOOR * dh)
 
 
 @ti.kernel
@@ -426,8 +443,8 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
         # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5), the bending
         # time left out where ``bending_time`` says (BEND_NONE: everywhere, BEND_BODY: on a vertex whose
         # contacts are all hair-hair).
-        # Kinematic (clamped) vertices do not move (1/W_z = 0) but still count in D_hat with the weight a
-        # free vertex would have: see ``_delassus``.
+        # Kinematic (clamped) vertices do not move (1/W_z = 0); the weight a free vertex would have there
+        # bounds D_hat from below: see ``_delassus``.
         inv_w = 0.0
         if con.vertex_contact_count[i] > 0:
             bend = bending_time == BEND_ALL
