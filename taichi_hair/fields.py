@@ -298,9 +298,6 @@ class ContactFields:
         self.active_vertex_count = ti.field(ti.i32, ())
         #: 1 / W_z,i (0 for kinematic vertices or vertices without contact) [m/N], shape (vertex_count,).
         self.vertex_contact_inv_weight = ti.field(float, n)
-        #: 1 / W_z,i as D_hat counts it: the same, but also for kinematic vertices with contacts [m/N],
-        #: shape (vertex_count,).
-        self.vertex_delassus_inv_weight = ti.field(float, n)
         #: Auxiliary positions z of the feasible projection [m], shape (vertex_count,).
         self.vertex_z = ti.field(vec3, n)
         #: Scaled collision dual lambda_z [m], shape (vertex_count,).

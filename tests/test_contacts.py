@@ -741,6 +741,38 @@ def test_contact_next_to_clamped_vertices_is_not_amplified():
     assert moved < 2e-3, moved
 
 
+def test_a_free_edge_pressed_into_a_clamped_root_edge_is_pushed_out_in_one_correction_sweep():
+    """Rod B (free) lies across clamped rod A right at A's root (A's closest point at s = 0.05 of its root edge,
+    both of whose vertices are clamped; h = 0.95, 0.05 there and -0.5, -0.5 on B), 60 um deeper than touching.
+    Only B can move and it can resolve the contact alone, so D_hat is the paper's sum over B's free vertices
+    (``narrow._delassus``: the lever bound max |h| / W = 0.5 / W equals it, so it does not act).  Claim:
+    one correction sweep takes B out to within a quarter radius (12.5 um; measured 0.07 um).  The rule before
+    counted A's clamped vertices in D_hat with the weight a free vertex would have there; A's 1 cm edges bend
+    slowly, so that weight is light and D_hat ~80x the paper's: B moved 0.7 um per sweep, and the head turn's
+    correction needed 100-200 sweeps (BENCHMARKS.md)."""
+    mat = RodMaterial(radius=5e-5)
+    r = mat.radius
+    b = GroomBuilder()
+    b.add_strand(line((0, 0, 0), (0, 0.04, 0), 5), mat)            # A along +y, root edge to y = 1 cm, clamped
+    y = 0.0005
+    b.add_strand(line((2 * r + 2e-5, y, -0.01), (2 * r + 2e-5, y, 0.01), 10), mat, root="free")  # B along z, 20 um off
+    model = b.finalize()
+    st = model.state()
+    cfg = ContactConfig(friction=0.2, velocity_margin=0.0, correction_iterations=1, correction_max_iterations=1)
+    con = SolverADMM(model, SolverADMMConfig(contacts=cfg)).contacts
+    con.detect(st, 1 / 96, (0.0, 0.0, 0.0), False)
+    assert con.contact_count == 1
+    x1 = st.positions().astype(np.float64)
+    x1[5:, 0] -= 8e-5                                                  # the step leaves B 60 um deep in A
+    x = ti.Vector.field(3, float, model.vertex_count)
+    x.from_numpy(x1.astype(np.float32))
+    con.correct(x, st.vertex_position, 1)
+    assert con.correction_sweeps_last == 1
+    xc = x.to_numpy().astype(np.float64)
+    d = min(segment_distance(xc[0], xc[1], xc[j], xc[j + 1]) for j in range(5, 14))
+    assert d > 2 * r - 0.25 * r, d
+
+
 def test_two_clamped_root_edges_that_overlap_get_no_contact_and_the_correction_stops_at_its_sweeps():
     """Two clamped strands whose root edges (vertices 0 and 1 fixed) cross 40 um apart, less than their radii's
     sum (100 um); the free parts are centimetres apart.  Nothing can separate the root edges, so they form no

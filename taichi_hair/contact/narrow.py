@@ -248,55 +248,66 @@ SPLIT_NONE = 2
 BEND_NONE, BEND_ALL, BEND_BODY = 0, 1, 2
 
 
-#: Where a contact touches a clamped vertex, D_hat_c = max(D_free, CLAMPED_DELASSUS_FLOOR * D_all): see ``_delassus``.
-CLAMPED_DELASSUS_FLOOR = 0.25
+#: Where a contact touches a clamped vertex, no free vertex moves by more than this many times the contact's gap
+#: in one projection: see ``_delassus``.
+CLAMPED_LEVER_BOUND = 1.0
 
 
 @ti.func
 def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> float:
-    """Mass-split Delassus diagonal D_hat_c of contact c (Sec. 4.5): D_hat_c = sum_i n_i h_ci^2 / W_z,i.
+    """Mass-split Delassus diagonal D_hat_c of contact c (Sec. 4.5): D_hat_c = sum_i n_i h_ci^2 / W_z,i over its
+    free vertices.
 
     ``split_by_batch``: True (n_i = c's batch's contacts on i), False (n_i = all of i's contacts), or
     ``SPLIT_NONE`` (n_i = 1: the plain Delassus diagonal D of Eq. 6, no splitting; the correction's option
     ``ContactConfig.correction_mass_splitting = "none"``).
 
-    Clamped vertices do not move (1/W_z = 0).  Summed over the free vertices alone (D_free, the paper's
-    D_hat), a contact whose point lies near a clamped vertex (h ~ 1 there, h ~ 0.01 on the free one) gets a
-    tiny D_hat, and a projection moves the free vertex by Delta u h / (W D_hat) ~ Delta u / h, a lever
-    amplified a hundredfold: measured, 8,600 clamped strands generated on a head (roots 2.5 mm apart, 103k
-    contacts at rest) moved by 56 mm then 1 m in two quasistatic iterations and diverged.  Counting the
-    clamped vertices with the weight a free vertex would have (D_all) bounds the lever but under-relaxes
-    every contact with a clamped vertex, also those the free vertices could resolve alone: a free edge
-    lying against a neighbour's clamped root edge closed about half its gap per projection, and the head
-    turn's end-of-step correction needed 100-200 sweeps (measured, ``assets/scenes/head_turn.toml``).
+    Clamped vertices do not move (1/W_z = 0).  A projection moves free vertex i by Delta u h_ci / (W_z,i
+    D_hat_c) (``apply_batch_corrections``).  Where the contact point lies near a clamped vertex (h ~ 1 there,
+    h ~ 0.01 on the free one) that is ~ Delta u / h, a lever amplified a hundredfold: measured, 8,600 clamped
+    strands generated on a head (roots 2.5 mm apart, 103k contacts at rest) moved by 56 mm then 1 m in two
+    quasistatic iterations and diverged.  So where c touches a clamped vertex, D_hat_c is at least
+    max_i |h_ci| / (A W_z,i) over its free vertices, A = ``CLAMPED_LEVER_BOUND`` = 1: no free vertex moves by
+    more than the gap.  For a free edge against a clamped one (equal weights, closest point at t on the free
+    edge) the paper's D_hat is (1 - t)^2 + t^2 against the bound's max(t, 1 - t): the bound under-relaxes such
+    a contact by at most 17 % (at t = 1/sqrt(2)), not at all at t = 0, 1/2 or 1.  A = 2 (never acting there)
+    gave the same speed-up but a little more strain on the ponytail scene (24 frames: strain p99 / max 0.004 /
+    0.06 % against 0.003 / 0.07 %, hair-pair max 83 against 42 um, 1 crossed pair against 0; one run each).
+    Contacts without a clamped vertex are unchanged.
 
-    So D_hat_c = max(D_free, kappa D_all) with kappa = ``CLAMPED_DELASSUS_FLOOR`` = 1/4: the paper's value
-    wherever the free vertices carry at least a quarter of D_all (a free edge against a clamped one: D_free
-    >= D_all / 2 when both vertices of the free edge are free), the bounded one where they carry less.  The
-    bound, in closed form (equal weights W, one copy): a free vertex moves by Delta u h_i / (W D_hat)
-    <= Delta u min(h_i / (kappa W D_all), 1 / h_i) <= Delta u / sqrt(kappa) = 2 Delta u, since D_hat >= D_free
-    >= h_i^2 / W and W D_all >= 1 for two segments.  Contacts without a clamped vertex have D_free = D_all:
-    unchanged.
+    (Until this rule, the clamped vertices counted in D_hat with the weight a free vertex would have there.
+    That bounded the lever too, but under-relaxed every contact with a clamped vertex, also those the free
+    vertices could resolve alone: a free edge against a neighbour's clamped root edge closed a fraction of
+    its gap per sweep (a light clamped vertex, of a strand with longer edges, counted most), and the head
+    turn's end-of-step correction needed 100-200 sweeps: 474 ms per frame against 255 with this rule, measured
+    on ``assets/scenes/head_turn.toml``, 24 frames.)
     """
     dh = 0.0
-    dfree = 0.0
+    lever = 0.0
+    clamped = False
     for k in ti.static(range(4)):
         v = con.contact_vertex[c][k]
         if v >= 0:
             h = con.contact_weight[c][k]
-            # Virtual copies of vertex v: all its contacts (the paper's n_i), or only those of c's
-            # batch, the ones updated at the same time as c (see ContactConfig.mass_splitting).
-            copies = con.vertex_contact_count[v]
-            if ti.static(split_by_batch == SPLIT_NONE):
-                copies = 1
-            elif ti.static(split_by_batch):
-                copies = 0
-                for e in range(con.vertex_contact_start[v], con.vertex_contact_start[v + 1]):
-                    if con.vertex_contact_list[e] % BATCHES == c % BATCHES:
-                        copies += 1
-            dh += copies * h * h * con.vertex_delassus_inv_weight[v]
-            dfree += copies * h * h * con.vertex_contact_inv_weight[v]
-    return ti.max(dfree, CLAMPED_DELASSUS_FLOOR * dh)
+            iw = con.vertex_contact_inv_weight[v]
+            if iw > 0.0:
+                # Virtual copies of vertex v: all its contacts (the paper's n_i), or only those of c's
+                # batch, the ones updated at the same time as c (see ContactConfig.mass_splitting).
+                copies = con.vertex_contact_count[v]
+                if ti.static(split_by_batch == SPLIT_NONE):
+                    copies = 1
+                elif ti.static(split_by_batch):
+                    copies = 0
+                    for e in range(con.vertex_contact_start[v], con.vertex_contact_start[v + 1]):
+                        if con.vertex_contact_list[e] % BATCHES == c % BATCHES:
+                            copies += 1
+                dh += copies * h * h * iw
+                lever = ti.max(lever, ti.abs(h) * iw)
+            else:
+                clamped = True
+    if clamped:
+        dh = ti.max(dh, lever / CLAMPED_LEVER_BOUND)
+    return dh
 
 
 @ti.kernel
@@ -443,8 +454,7 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
         # W_z,i = m_i / dt~^2 with dt~ = min(dt, sqrt(L~/|g|), 2 L~^2/R sqrt(rho/E_b)) (Sec. 4.5), the bending
         # time left out where ``bending_time`` says (BEND_NONE: everywhere, BEND_BODY: on a vertex whose
         # contacts are all hair-hair).
-        # Kinematic (clamped) vertices do not move (1/W_z = 0); the weight a free vertex would have there
-        # bounds D_hat from below: see ``_delassus``.
+        # Kinematic (clamped) vertices do not move (1/W_z = 0): see ``_delassus`` for their contacts' D_hat.
         inv_w = 0.0
         if con.vertex_contact_count[i] > 0:
             bend = bending_time == BEND_ALL
@@ -458,7 +468,6 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             if ti.static(dynamic):
                 dtt = ti.min(dtt, dt)
             inv_w = dtt * dtt / vertex_weight_base[i]
-        con.vertex_delassus_inv_weight[i] = inv_w
         if vertex.vertex_is_fixed[i] != 0:
             inv_w = 0.0
         con.vertex_contact_inv_weight[i] = inv_w
