@@ -16,11 +16,14 @@ Also reported: the one-off costs (groom generation, session build, first frame =
 an edit: ``scale_length`` on 10 % of the strands followed by one frame, i.e. the in-place Model update.
 ``--edit spread`` (default) takes every 10th strand, all over the head (about half the render strands are
 bound to an edited guide and are bound again); ``--edit region`` the 10 % whose roots are nearest one root
-(a brush stroke's selection: only the region and its border are bound again).
+(a brush stroke's selection: only the region and its border are bound again).  The process is set up as the
+grooming app's (``--numpy-huge-pages app``, default: NumPy's huge-page advice off, see
+``taichi_hair.cli.common.no_numpy_huge_pages``); ``--numpy-huge-pages numpy`` keeps NumPy's default.
 
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
-        [--contacts on|off] [--size 960 720] [--edit spread|region] [--rest-pose authored|sag-free] [--out FILE]
+        [--contacts on|off] [--size 960 720] [--edit spread|region] [--rest-pose authored|sag-free]
+        [--numpy-huge-pages app|numpy] [--out FILE]
 
 JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>_contacts_<on|off>.json`` by default; a run
 whose simulation diverges writes what it measured and the error (exit code 1).
@@ -53,6 +56,9 @@ def main(argv=None):
                    help="GroomingConfig.rest_pose: sag-free solves the guides' rest pose at the build and after the edit")
     p.add_argument("--edit", choices=["spread", "region"], default="spread",
                    help="which 10 %% of the strands the edit takes: every 10th, or those rooted nearest one root")
+    p.add_argument("--numpy-huge-pages", choices=("app", "numpy"), default="app",
+                   help="app: as the grooming app and the command line do (NumPy's huge-page advice off, "
+                        "taichi_hair.cli.common.no_numpy_huge_pages); numpy: NumPy's own default")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     bench = Bench("groom", argv)
@@ -61,13 +67,16 @@ def main(argv=None):
 
     ti.init(arch=getattr(ti, args.arch), default_fp=ti.f32, log_level=ti.WARN)
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
+    from taichi_hair.cli.common import no_numpy_huge_pages
+
+    huge_pages_off = no_numpy_huge_pages() if args.numpy_huge_pages == "app" else False
     from taichi_hair.groom.generators import HEAD_MESH_PATH, GeneratorConfig, generate_groom, load_head, read_obj_groups
     from taichi_hair.groom.session import GroomingConfig, GroomingSession
     from taichi_hair.render import CameraConfig, ViewerGGUI, strand_colors
 
     res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
-           "schedule": args.schedule, "rest_pose": args.rest_pose,
+           "schedule": args.schedule, "rest_pose": args.rest_pose, "numpy_huge_pages_off": huge_pages_off,
            "image": list(args.size), "date": datetime.date.today().isoformat()}
 
     with stopwatch(ti.sync) as sw:
