@@ -77,13 +77,13 @@ def no_numpy_huge_pages() -> bool:
     the environment's ``NUMPY_MADVISE_HUGEPAGE`` says otherwise.  Returns whether it switched them off.
 
     Why: NumPy (>= 1.20 on Linux >= 4.6) advises huge pages for every array of 4 MiB or more.  Where the kernel
-    compacts memory on such a fault (``/sys/kernel/mm/transparent_hugepage/defrag`` = ``madvise``, the default)
-    and cannot find free 2 MiB blocks, each fault stalls and the array still gets small pages.  Measured on the
-    2-core VM (2026-12-05, ``AnonHugePages: 0 kB`` throughout): copying a 29 MB array into new memory took
-    62-69 ms with the advice and 13-15 ms without, every time.  A grooming edit makes such arrays (the new groom,
-    since undo keeps the old one): an edit of 8,600 of 86,000 strands went from 0.21 s host + 0.31 s update
-    to 0.10 + 0.27 s (``benchmarks/bench_groom.py``).  Where huge pages do come, the advice saves most page
-    faults of a new array (the same copy without any fault costs ~4 ms here), so the most this costs elsewhere
+    compacts memory on such a fault (``/sys/kernel/mm/transparent_hugepage/defrag`` = ``madvise``, the default),
+    each 2 MiB fault can stall.  Measured on the 2-core VM (2026-12-05, ``benchmarks/probes/numpy_huge_pages.py``;
+    the huge pages did come): copying a 29 MB array into new memory took 62-74 ms with the advice and 13-15 ms
+    without, every time.  A grooming edit makes such arrays (the new groom, since undo keeps the old one): an edit
+    of 8,600 of 86,000 strands went from 0.21 s host + 0.32 s update to 0.10 + 0.27 s
+    (``benchmarks/bench_groom.py``).  Where huge pages come fast, the advice saves most page faults of a new array
+    (the same copy into memory already touched takes ~4 ms here), so, as an estimate, the most this costs elsewhere
     is ~10 ms per 29 MB of new memory.  Applied by the command line and the grooming app with ``ti.init``; the
     library never applies it.  Skipped where this NumPy has no switch."""
     if os.environ.get(NUMPY_HUGE_PAGES_ENV) is not None:
