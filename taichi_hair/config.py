@@ -67,6 +67,12 @@ class CorrectionEdgeOrder(StrEnum):
     STRANDS = "strands"
 
 
+class CorrectionContactOrder(StrEnum):
+    AUTO = "auto"
+    BATCHES = "batches"
+    SEQUENTIAL = "sequential"
+
+
 class MassSplitting(StrEnum):
     BATCH = "batch"
     VERTEX = "vertex"
@@ -246,6 +252,11 @@ class ContactConfig:
             p99 / max 0.074 / 0.65 % -> 0.008 / 0.13 % (300 strands) and 0.014 / 0.17 % -> 0.000 / 0.05 %
             (1,000), hair-pair penetration about the same, the time per frame within this VM's noise
             (+-15 %; the correction itself +2 % and +19 % at 1,000 strands in two runs) [-].
+        correction_contact_order: ``"batches"``: each correction sweep passes the projection's 8 batches (Jacobi
+            within a batch); ``"sequential"``: every contact in index order on one thread, its push applied before
+            the next is solved (Gauss-Seidel); ``"auto"`` (default): sequential on a CPU, batches on a GPU.  On the
+            2-core CPU (2026-12-05, BENCHMARKS.md) the correction took 275 -> 150 ms per step on the 1,000-strand
+            hairball and 47 -> 35 on the ponytail; not measured on more cores [-].
         correction_max_iterations: after its ``correction_iterations`` sweeps the correction goes on, 5
             sweeps at a time, while a contact is still deeper than ``correction_tolerance``, up to this
             many sweeps in all (equal to ``correction_iterations``: the paper's fixed count) [-].
@@ -372,6 +383,7 @@ class ContactConfig:
     relinearize_correction: bool = True
     correction_lengths: CorrectionLengths = CorrectionLengths.REST
     correction_edge_order: CorrectionEdgeOrder = CorrectionEdgeOrder.AUTO
+    correction_contact_order: CorrectionContactOrder = CorrectionContactOrder.AUTO
     correction_max_iterations: int = 80
     correction_tolerance: float = 0.0
     correction_relinearize_every: int = 10
@@ -407,6 +419,8 @@ class ContactConfig:
                                             self.correction_lengths)
         self.correction_edge_order = as_choice(CorrectionEdgeOrder, "ContactConfig", "correction_edge_order",
                                                self.correction_edge_order)
+        self.correction_contact_order = as_choice(CorrectionContactOrder, "ContactConfig", "correction_contact_order",
+                                                  self.correction_contact_order)
         self.correction_mass_splitting = as_choice(MassSplitting, "ContactConfig", "correction_mass_splitting",
                                                    self.correction_mass_splitting)
         self.weight_time = as_choice(WeightTime, "ContactConfig", "weight_time", self.weight_time)

@@ -8,7 +8,7 @@ and grown when the contact count overflows.
 import numpy as np
 import taichi as ti
 
-from ..config import CorrectionEdgeOrder, CorrectionLengths, MassSplitting, WeightTime
+from ..config import CorrectionContactOrder, CorrectionEdgeOrder, CorrectionLengths, MassSplitting, WeightTime
 from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, SPLIT_NONE, build_adjacency, count_contacts, relinearize_contacts,
@@ -425,7 +425,7 @@ class ContactPipeline:
         every 10 sweeps, no mass splitting and frictionless hair pairs gave 54 / 29 um after 40 / 80
         sweeps, and with the acceleration 20 / 3 um (from another run's frame 10: 88 / 55 um without it).
         """
-        from .projection import (chebyshev_step, contact_statistics, correction_end, correction_sweep,
+        from .projection import (SEQUENTIAL, chebyshev_step, contact_statistics, correction_end, correction_sweep,
                                  hold_lengths_sweep, projection_begin, projection_sweep, store_edge_lengths)
 
         m = self.model
@@ -444,6 +444,9 @@ class ContactPipeline:
             store_edge_lengths(m.edge, x, self.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
         projection_begin(x, self.con, True)
         serial, small = self._serial_contacts, self._serial_strands
+        if (cfg.correction_contact_order == CorrectionContactOrder.SEQUENTIAL
+                or (cfg.correction_contact_order == CorrectionContactOrder.AUTO and not on_gpu())):
+            serial = SEQUENTIAL
         tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else 0.25 * self.max_radius
         cap = max(sweeps, cfg.correction_max_iterations)
         rho = cfg.correction_chebyshev_rho

@@ -126,6 +126,36 @@ def solve_batch_contacts(con: ti.template(), z: ti.template(), batch: ti.templat
             con.contact_delta[c] = vec3(0.0)
 
 
+#: ``serial`` of ``correction_sweep``: every contact in turn on one thread, each applied before the next is solved.
+SEQUENTIAL = 2
+
+
+@ti.func
+def solve_contacts_sequential(con: ti.template(), z: ti.template()):
+    """Steps (1) and (2) for every contact in index order on the launching thread: a true Gauss-Seidel sweep,
+    each contact seeing the pushes of those before it (no Jacobi sum within a batch)."""
+    nc = ti.min(con.contact_count[None], con.capacity)
+    ti.loop_config(serialize=True)
+    for c in range(nc):
+        dh = con.contact_delassus[c]
+        if dh > 0.0:
+            u_star = _contact_u(con, z, c)
+            r_old = con.contact_accumulated[c]
+            r_new, status = coulomb_local_solve(u_star - r_old, con.contact_normal[c], con.contact_friction[c])
+            d = r_new - r_old
+            con.contact_delta[c] = d
+            con.contact_accumulated[c] = r_new
+            con.contact_status[c] = status
+            for k in ti.static(range(4)):
+                v = con.contact_vertex[c][k]
+                if v >= 0:
+                    iw = con.vertex_contact_inv_weight[v]
+                    if iw > 0.0:
+                        z[v] += iw * (con.contact_weight[c][k] / dh) * d
+        else:
+            con.contact_delta[c] = vec3(0.0)
+
+
 @ti.func
 def apply_batch_corrections(con: ti.template(), z: ti.template(), batch: ti.template(), serial: ti.template()):
     """Step (2): z_i += W_z,i^-1 sum_{c in batch} h_ci Delta u_c / D_hat_c, vertices in parallel.
@@ -382,11 +412,16 @@ def correction_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.temp
 
     A Gauss-Seidel pass over contacts and inextensibility together, so a crossed pair pushed back drags
     its strands' neighbouring vertices along instead of stretching the edges at the contact.  ``serial``: the
-    contact loops on the launching thread (``projection_sweep``); ``serial_strands``: the edge passes too.
+    contact loops on the launching thread (``projection_sweep``), or ``SEQUENTIAL``: no batches, every contact
+    in turn (``solve_contacts_sequential``, ``ContactConfig.correction_contact_order``); ``serial_strands``: the
+    edge passes on the launching thread too.
     """
-    for batch in ti.static(range(BATCHES)):
-        solve_batch_contacts(con, con.vertex_z, batch, serial)
-        apply_batch_corrections(con, con.vertex_z, batch, serial)
+    if ti.static(serial == SEQUENTIAL):
+        solve_contacts_sequential(con, con.vertex_z)
+    else:
+        for batch in ti.static(range(BATCHES)):
+            solve_batch_contacts(con, con.vertex_z, batch, serial)
+            apply_batch_corrections(con, con.vertex_z, batch, serial)
     hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial_strands)
 
 
