@@ -837,7 +837,7 @@ def test_a_pair_authored_closer_than_two_radii_keeps_its_rest_distance_and_does_
     assert abs(separation() - expected) < 0.2 * mat.radius, (separation(), expected)
 
 
-@pytest.mark.parametrize("lengths", ["rest", "before", "free", "rest_along_strands"])
+@pytest.mark.parametrize("lengths", ["rest", "before", "free", "rest_along_strands", "rest_contact_batches"])
 def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(lengths):
     """Rod B lies across rod A, 20 um above contact at x^t, and ends the ADMM iterations 1 mm below A's
     axis at the crossing (a pair that passed through each other).  The end-of-step correction pushes it
@@ -845,7 +845,9 @@ def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(lengths):
     0.5 % of the length it holds (0.36 % measured for "before": Gauss-Seidel edge passes leave a remainder);
     the paper's correction (``"free"``), moving the contact vertices alone, stretches the edges at the
     crossing by more than 1 % (what the hairball's impact measured).  With the edges passed along each strand
-    (``correction_edge_order="strands"``) instead of in two colours, within 0.01 %."""
+    (``correction_edge_order="strands"``) instead of in two colours, within 0.01 %.  The contacts solved in the 8
+    batches (``correction_contact_order="batches"``, the GPU's order) instead of one by one (the CPU's) hold as
+    ``"rest"`` does."""
     mat = RodMaterial(radius=5e-5)
     r = mat.radius
     b = GroomBuilder()
@@ -859,8 +861,11 @@ def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(lengths):
     z = x1[11:, 2]
     x1[11:, 1] -= (y0 + 1e-3) * np.exp(-(z / 0.003) ** 2)   # B's middle dips 1 mm below A's axis
     order = "strands" if lengths.endswith("_along_strands") else "colours"
-    lengths = lengths.removesuffix("_along_strands")
-    cfg = ContactConfig(friction=0.2, correction_lengths=lengths, velocity_margin=0.0, correction_edge_order=order)
+    # The contacts one by one (``correction_contact_order``: "auto" is "sequential" on the CPU) or in the 8 batches.
+    contact_order = "batches" if lengths.endswith("_contact_batches") else "auto"
+    lengths = lengths.removesuffix("_along_strands").removesuffix("_contact_batches")
+    cfg = ContactConfig(friction=0.2, correction_lengths=lengths, velocity_margin=0.0, correction_edge_order=order,
+                        correction_contact_order=contact_order)
     con = SolverADMM(model, SolverADMMConfig(contacts=cfg)).contacts
     con.detect(st, 1 / 96, (0.0, 0.0, 0.0), False)
     assert con.contact_count >= 1
