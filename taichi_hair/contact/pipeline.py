@@ -20,8 +20,8 @@ from .projection import warn_soft_rest_lengths
 #: with 4 and 0.026 / 0.19 % with 8; the hairball (300 strands, 12 frames) 0.18 / 0.79 % and 0.13 / 0.66 %,
 #: its hair-pair penetration p99 (worst frame) 36 and 32 um.  Not 16, although the contacts solved one by one
 #: (``correction_contact_order``) meet the depth tolerance sooner and left one impact edge of the 300-strand
-#: hairball 0.19 % long (0.05 % with 16): 16 passes slide the frictional tip of the stick-slip validation, whose
-#: onset error went from within 5 % to 81 % (tests/test_stick_slip.py; 2026-12-05).
+#: hairball 0.19 % long (0.05 % with 16): with 16 the stick-slip validation's onset error went from within 5 % to
+#: 81 % (tests/test_stick_slip.py; 2026-12-05; as I read it, the passes slide its frictional tip).
 _FINAL_EDGE_PASSES = 8
 #: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial_contacts``) [-].  Measured
 #: on 2 cores (2026-12-05, bit-identical either way): the head turn (6,148 contacts) 761 -> 529 ms per frame, the
