@@ -396,11 +396,15 @@ def projection_sweep(con: ti.template(), serial: ti.template()):
     Each step is a top-level loop of the kernel; Taichi runs top-level loops
     one after the other, so the batches stay sequential within one launch.  ``serial``: every loop runs on
     the launching thread (``ContactPipeline._serial_contacts``: where the contacts are few, the 16 dispatches to the
-    thread pool cost more than the work; the same operations in the same order, so the same bits).
+    thread pool cost more than the work; the same operations in the same order, so the same bits), or
+    ``SEQUENTIAL`` (the correction's contacts one by one, ``ContactConfig.correction_contact_order``).
     """
-    for batch in ti.static(range(BATCHES)):
-        solve_batch_contacts(con, con.vertex_z, batch, serial)
-        apply_batch_corrections(con, con.vertex_z, batch, serial)
+    if ti.static(serial == SEQUENTIAL):
+        solve_contacts_sequential(con, con.vertex_z)
+    else:
+        for batch in ti.static(range(BATCHES)):
+            solve_batch_contacts(con, con.vertex_z, batch, serial)
+            apply_batch_corrections(con, con.vertex_z, batch, serial)
 
 
 @ti.kernel
