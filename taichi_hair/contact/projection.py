@@ -389,6 +389,18 @@ def projection_begin(x: ti.template(), con: ti.template(), correction: ti.templa
         begin_projection(x, con)
 
 
+@ti.func
+def sweep_contacts(con: ti.template(), serial: ti.template()):
+    """Every contact once on z: the 8 batches in turn (``serial``: each loop on the launching thread), or with
+    ``serial = SEQUENTIAL`` each contact in index order, its push applied before the next is solved."""
+    if ti.static(serial == SEQUENTIAL):
+        solve_contacts_sequential(con, con.vertex_z)
+    else:
+        for batch in ti.static(range(BATCHES)):
+            solve_batch_contacts(con, con.vertex_z, batch, serial)
+            apply_batch_corrections(con, con.vertex_z, batch, serial)
+
+
 @ti.kernel
 def projection_sweep(con: ti.template(), serial: ti.template()):
     """One Gauss-Seidel sweep over the 8 batches, each in the paper's two deterministic steps.
@@ -399,12 +411,7 @@ def projection_sweep(con: ti.template(), serial: ti.template()):
     thread pool cost more than the work; the same operations in the same order, so the same bits), or
     ``SEQUENTIAL`` (the correction's contacts one by one, ``ContactConfig.correction_contact_order``).
     """
-    if ti.static(serial == SEQUENTIAL):
-        solve_contacts_sequential(con, con.vertex_z)
-    else:
-        for batch in ti.static(range(BATCHES)):
-            solve_batch_contacts(con, con.vertex_z, batch, serial)
-            apply_batch_corrections(con, con.vertex_z, batch, serial)
+    sweep_contacts(con, serial)
 
 
 @ti.kernel
@@ -420,12 +427,7 @@ def correction_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.temp
     in turn (``solve_contacts_sequential``, ``ContactConfig.correction_contact_order``); ``serial_strands``: the
     edge passes on the launching thread too.
     """
-    if ti.static(serial == SEQUENTIAL):
-        solve_contacts_sequential(con, con.vertex_z)
-    else:
-        for batch in ti.static(range(BATCHES)):
-            solve_batch_contacts(con, con.vertex_z, batch, serial)
-            apply_batch_corrections(con, con.vertex_z, batch, serial)
+    sweep_contacts(con, serial)
     hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial_strands)
 
 
