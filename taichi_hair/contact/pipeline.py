@@ -211,11 +211,13 @@ class ContactPipeline:
         skin = cfg.pair_skin if cfg.hair_hair and sweep == 0.0 and fall == 0.0 and not self._skin_off else 0.0
         self.pairs.skin_valid, self.pair_skin_searched = self.pairs.skin_valid and skin > 0.0, -1
         if skin > 0.0:
+            def fill_grid():  # the boxes grown by the skin, entered in the grid (which may grow: read it after)
+                proximity_boxes(m.edge, x, self.vertex_radius, g, self.boxes, margin + skin, 0.0, 0.0)
+                h_grid = self._fill_box_grid(max(max_edge, 1e-9))
+                return h_grid, self.boxes
+
             self.pair_skin_searched = find_candidates_skin(m.vertex, m.edge, x, self.vertex_radius, g, self.pairs,
-                                                           margin, skin, lambda: (proximity_boxes(
-                                                               m.edge, x, self.vertex_radius, g, self.boxes,
-                                                               margin + skin, 0.0, 0.0),
-                                                               self._fill_box_grid(max(max_edge, 1e-9)), self.boxes)[1:])
+                                                           margin, skin, fill_grid)
             if self.pair_skin_searched < 0:  # (a failed try costs a search: not again for this pipeline)
                 self._skin_off = True
                 warnings.warn(f"ContactConfig.pair_skin = {skin:g} m: the pairs within reach + skin do not fit the "

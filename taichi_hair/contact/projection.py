@@ -142,8 +142,7 @@ def solve_contacts_sequential(con: ti.template(), z: ti.template()):
             u_star = _contact_u(con, z, c)
             r_old = con.contact_accumulated[c]
             r_new, status = coulomb_local_solve(u_star - r_old, con.contact_normal[c], con.contact_friction[c])
-            d = r_new - r_old
-            con.contact_delta[c] = d
+            d = r_new - r_old  # (applied here: no ``contact_delta`` for a vertex pass to read)
             con.contact_accumulated[c] = r_new
             con.contact_status[c] = status
             for k in ti.static(range(4)):
@@ -152,8 +151,6 @@ def solve_contacts_sequential(con: ti.template(), z: ti.template()):
                     iw = con.vertex_contact_inv_weight[v]
                     if iw > 0.0:
                         z[v] += iw * (con.contact_weight[c][k] / dh) * d
-        else:
-            con.contact_delta[c] = vec3(0.0)
 
 
 @ti.func
