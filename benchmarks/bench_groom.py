@@ -9,8 +9,11 @@ and synchronised (``ti.sync``):
 
 * simulation: ``SolverADMM.step`` of the guides (contacts included);
 * skinning: ``SkinningLBS.deform`` of every render strand;
-* drawing: GGUI off screen: copy the skinned positions into the line buffer, draw the lines and the head,
-  read the image back (the read-back is what an off-screen tool pays; a window would ``show`` instead).
+* drawing: off screen: copy the skinned positions into the viewer's strand buffer, draw the strands and the
+  head, read the image back as the (H, W, 3) array of ``ViewerGGUI.image`` (what an off-screen tool pays; a
+  window would ``show`` instead).  ``--drawing lines`` draws with GGUI's lines on the Vulkan device,
+  ``--drawing raster`` with the Taichi rasteriser (``taichi_hair.render.raster``); ``auto`` (default) as
+  the grooming app: the rasteriser when Taichi runs on the CPU.
 
 Also reported: the one-off costs (groom generation, session build, first frame = kernel compilation) and
 an edit: ``scale_length`` on 10 % of the strands followed by one frame, i.e. the in-place Model update.
@@ -23,7 +26,7 @@ grooming app's (``--numpy-huge-pages app``, default: NumPy's huge-page advice of
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
         [--contacts on|off] [--size 960 720] [--edit spread|region] [--rest-pose authored|sag-free]
-        [--numpy-huge-pages app|numpy] [--out FILE]
+        [--numpy-huge-pages app|numpy] [--drawing auto|lines|raster] [--out FILE]
 
 JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>_contacts_<on|off>.json`` by default; a run
 whose simulation diverges writes what it measured and the error (exit code 1).
@@ -59,6 +62,8 @@ def main(argv=None):
     p.add_argument("--numpy-huge-pages", choices=("app", "numpy"), default="app",
                    help="app: as the grooming app and the command line do (NumPy's huge-page advice off, "
                         "taichi_hair.cli.common.no_numpy_huge_pages); numpy: NumPy's own default")
+    p.add_argument("--drawing", choices=("auto", "lines", "raster"), default="auto",
+                   help="ViewerGGUI(drawing=...): GGUI lines or the Taichi rasteriser (auto: raster on a CPU arch)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     bench = Bench("groom", argv)
@@ -101,7 +106,8 @@ def main(argv=None):
 
     viewer = None
     if not args.no_draw:
-        viewer = ViewerGGUI(args.size[0], args.size[1], show_window=False)
+        viewer = ViewerGGUI(args.size[0], args.size[1], show_window=False, drawing=args.drawing)
+        res["drawing"] = viewer.drawing
         v, f, _ = read_obj_groups(HEAD_MESH_PATH)
         viewer.set_head(v, f)
         viewer.set_camera(CameraConfig.framing(np.vstack([groom.points, v]), direction=(0.55, 0.25, 1.0)))
@@ -118,7 +124,7 @@ def main(argv=None):
             if viewer is not None:
                 viewer.set_positions_field(sim.skin.fields.render_vertex_position)
                 viewer.render()
-                viewer.window.get_image_buffer_as_numpy()
+                viewer.image()  # (the frame, read back: the drawing is done)
         ms = (1e3 * simulation.seconds, 1e3 * skinning.seconds, 1e3 * drawing.seconds)
         res["frames_all_ms"].append(list(ms))
         return ms
