@@ -368,12 +368,14 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
             pen = con.contact_thickness[c] - side
             if side < 0.0:
                 ti.atomic_add(out[5], 1.0)
-            ti.atomic_max(out[4], pen)
+            if pen > out[4]:  # (read first: the maximum only grows, and most contacts are below it)
+                ti.atomic_max(out[4], pen)
         else:
             R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
             dist, nrm = collider_distance(cs, k, R.transpose() @ (x[vtx[0]] - T))
             pen = radius[vtx[0]] - dist
-            ti.atomic_max(out[3], pen)
+            if pen > out[3]:
+                ti.atomic_max(out[3], pen)
         con.contact_penetration[c] = ti.max(pen, 0.0)
 
 
