@@ -483,9 +483,8 @@ class ContactPipeline:
                     # fraction of the last contact push (a 0.4 mm push measured 0.18 % after one pass).  They
                     # run before the depth check, so the check sees what the correction would return (they
                     # re-open contacts: p99 12 -> 36 um, measured on the hairball, when they ran after it).
-                    for _ in range(_FINAL_EDGE_PASSES):
-                        hold_lengths_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along,
-                                           small)
+                    hold_lengths_sweep(m.vertex, m.edge, m.strand, self.con, self.edge_held_length, along, small,
+                                       _FINAL_EDGE_PASSES)
                 stop = done >= cap
                 if not stop:
                     # Past the fixed sweeps, go on in groups of 5 while a contact is deeper than the tolerance.

@@ -266,48 +266,59 @@ def hold_edge_lengths(vertex: ti.template(), edge: ti.template(), z: ti.template
 
 @ti.func
 def hold_strand_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.template(), z: ti.template(),
-                        length: ti.template(), serial: ti.template()):
+                        length: ti.template(), serial: ti.template(), passes: ti.template()):
     """Project every edge back to its held length (``_hold_edge``) root to tip and then tip to root, one
     strand per thread (bitwise reproducible): a symmetric Gauss-Seidel pass that carries a contact's push
-    along the whole strand in one sweep, where the two colours carry it one edge per sweep."""
+    along the whole strand in one sweep, where the two colours carry it one edge per sweep.  ``passes`` such
+    passes, each strand's one after the other on its thread (strands do not share edges: the same operations as
+    ``passes`` launches, with the strand in cache)."""
     ti.loop_config(serialize=serial)
     for s in range(strand.strand_vertex_start.shape[0]):
-        start = strand.strand_vertex_start[s]
-        m = strand.strand_vertex_count[s]
-        # ``_hold_edge`` on edges start, ..., start + m - 2 and back, the operations unchanged, but the vertex
-        # two edges share kept in registers from one edge to the next (not stored and loaded again).
-        za = z[start]
-        wa = _inverse_mass(vertex, start)
-        for k in range(m - 1):
-            j = start + k
-            zb = z[j + 1]
-            wb = _inverse_mass(vertex, j + 1)
-            za, zb = _hold_pair(edge, length, j, za, zb, wa, wb)
-            z[j] = za
-            za = zb
-            wa = wb
+        for _ in range(passes):
+            _hold_one_strand(vertex, edge, strand, z, length, s)
+
+
+@ti.func
+def _hold_one_strand(vertex: ti.template(), edge: ti.template(), strand: ti.template(), z: ti.template(),
+                     length: ti.template(), s: ti.i32):
+    """One symmetric pass of ``hold_strand_lengths`` on strand s."""
+    start = strand.strand_vertex_start[s]
+    m = strand.strand_vertex_count[s]
+    # ``_hold_edge`` on edges start, ..., start + m - 2 and back, the operations unchanged, but the vertex
+    # two edges share kept in registers from one edge to the next (not stored and loaded again).
+    za = z[start]
+    wa = _inverse_mass(vertex, start)
+    for k in range(m - 1):
+        j = start + k
+        zb = z[j + 1]
+        wb = _inverse_mass(vertex, j + 1)
+        za, zb = _hold_pair(edge, length, j, za, zb, wa, wb)
+        z[j] = za
+        za = zb
+        wa = wb
+    zb = za
+    wb = wa
+    for k in range(m - 1):
+        j = start + m - 2 - k
+        za = z[j]
+        wa = _inverse_mass(vertex, j)
+        za, zb = _hold_pair(edge, length, j, za, zb, wa, wb)
+        z[j + 1] = zb
         zb = za
         wb = wa
-        for k in range(m - 1):
-            j = start + m - 2 - k
-            za = z[j]
-            wa = _inverse_mass(vertex, j)
-            za, zb = _hold_pair(edge, length, j, za, zb, wa, wb)
-            z[j + 1] = zb
-            zb = za
-            wb = wa
-        z[start] = zb
+    z[start] = zb
 
 
 @ti.func
 def hold_lengths(vertex: ti.template(), edge: ti.template(), strand: ti.template(), z: ti.template(),
-                 length: ti.template(), along_strands: ti.template(), serial: ti.template()):
-    """One pass of the edge lengths: along each strand (``hold_strand_lengths``) or both colours."""
+                 length: ti.template(), along_strands: ti.template(), serial: ti.template(), passes: ti.template()):
+    """``passes`` passes of the edge lengths: along each strand (``hold_strand_lengths``) or both colours."""
     if ti.static(along_strands):
-        hold_strand_lengths(vertex, edge, strand, z, length, serial)
+        hold_strand_lengths(vertex, edge, strand, z, length, serial, passes)
     else:
-        for colour in ti.static(range(2)):
-            hold_edge_lengths(vertex, edge, z, length, colour)
+        for _ in ti.static(range(passes)):
+            for colour in ti.static(range(2)):
+                hold_edge_lengths(vertex, edge, z, length, colour)
 
 
 @ti.kernel
@@ -427,7 +438,7 @@ def correction_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.temp
     edge passes on the launching thread too.
     """
     sweep_contacts(con, serial)
-    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial_strands)
+    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial_strands, 1)
 
 
 @ti.kernel
@@ -444,10 +455,11 @@ def projection_end(x: ti.template(), con: ti.template(), buf: ti.template()):
 
 @ti.kernel
 def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.template(), con: ti.template(),
-                       length: ti.template(), along_strands: ti.template(), serial: ti.template()):
-    """The edge lengths once more (``hold_lengths``), after the last contact sweep of the correction; ``serial``:
-    on the launching thread (a small model, ``ContactPipeline.correct``)."""
-    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial)
+                       length: ti.template(), along_strands: ti.template(), serial: ti.template(),
+                       passes: ti.template()):
+    """The edge lengths ``passes`` more times (``hold_lengths``; one launch), after the last contact sweep of the
+    correction; ``serial``: on the launching thread (a small model, ``ContactPipeline.correct``)."""
+    hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial, passes)
 
 
 @ti.kernel
