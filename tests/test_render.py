@@ -52,13 +52,7 @@ def segment_distance(q, a, b):
 def test_numpy_camera_equals_the_ggui_camera(viewer):
     for cam in (CAMERA, CameraConfig(eye=(-0.3, 0.4, -0.2), target=(0.01, 0.02, 0.0), up=(0.0, 1.0, 0.2),
                                      fov=65.0, z_near=0.01, z_far=100.0)):
-        c = viewer.camera
-        c.position(*cam.eye)
-        c.lookat(*cam.target)
-        c.up(*cam.up)
-        c.fov(cam.fov)
-        c.z_near(cam.z_near)
-        c.z_far(cam.z_far)
+        c = viewer.ggui_camera(cam)  # as the viewer sets it for GGUI's scene
         np.testing.assert_allclose(np.array(c.get_view_matrix()).T, view_matrix(cam), atol=1e-6)
         np.testing.assert_allclose(np.array(c.get_projection_matrix(W / H)).T, projection_matrix(cam, W / H),
                                    rtol=1e-5, atol=1e-7)

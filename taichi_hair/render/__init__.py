@@ -455,6 +455,17 @@ class ViewerGGUI:
         self.head_color = tuple(float(c) for c in color)
 
     # ------------------------------------------------------------------ drawing
+    def ggui_camera(self, c: CameraConfig):
+        """The viewer's ``ti.ui.Camera`` set to ``c`` (what :meth:`render` draws GGUI's scene with)."""
+        cam = self.camera
+        cam.position(*c.eye)
+        cam.lookat(*c.target)
+        cam.up(*c.up)
+        cam.fov(c.fov)
+        cam.z_near(c.z_near)
+        cam.z_far(c.z_far)
+        return cam
+
     def render(self) -> None:
         """Draw one frame into the window's image (call :meth:`show` afterwards on screen)."""
         if self._raster is not None:
@@ -463,15 +474,9 @@ class ViewerGGUI:
             if self.show_window:
                 self.canvas.set_image(self._raster.image)
             return
-        cam, c = self.camera, self.camera_config
-        cam.position(*c.eye)
-        cam.lookat(*c.target)
-        cam.up(*c.up)
-        cam.fov(c.fov)
-        cam.z_near(c.z_near)
-        cam.z_far(c.z_far)
+        c = self.camera_config
         s = self.scene
-        s.set_camera(cam)
+        s.set_camera(self.ggui_camera(c))
         s.ambient_light((0.45, 0.45, 0.45))
         eye = np.asarray(c.eye)
         s.point_light(pos=tuple(eye + np.array([0.0, 0.5, 0.0]) * np.linalg.norm(eye - np.asarray(c.target))),
