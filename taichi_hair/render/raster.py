@@ -14,7 +14,8 @@ fragment: the key is the fragment's depth (28 bits of 1 - z_near / w, w the dist
 direction, which is affine in screen space) above 36 bits of payload (the primitive's id, then 6 bits of the
 position along an edge).  The nearest fragment wins whatever order the threads run in, and equal depths are
 broken by the id: the image is deterministic.  Primitives with a vertex behind the near plane are skipped
-(GGUI clips them; the grooming tool and the renderer keep the groom in front of the camera).
+(GGUI clips them; the grooming tool and the renderer keep the groom in front of the camera), and nothing is cut at
+the far plane (GGUI cuts there; the cameras of ``CameraConfig.framing`` put it behind the groom).
 
 Image layout: ``image`` is (W, H) RGB in [0, 1] with row 0 at the *bottom*, as GGUI's
 ``canvas.set_image`` takes it and ``Window.get_image_buffer_as_numpy`` returns it.
@@ -220,9 +221,11 @@ class Rasterizer:
         self._screen = {}
 
     def _screen_field(self, name: str, n: int):
+        """Screen positions of up to n points, grown in powers of two (each new field compiles the kernels
+        that take it again: a pin more must not)."""
         f = self._screen.get(name)
         if f is None or f.shape[0] < n:
-            f = ti.Vector.field(4, ti.f32, max(n, 1))
+            f = ti.Vector.field(4, ti.f32, 1 << max(4, (max(n, 1) - 1).bit_length()))
             self._screen[name] = f
         return f
 
