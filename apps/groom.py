@@ -290,7 +290,7 @@ class GroomApp:
         # Colours change with the groom object (every edit makes a new one), the mode or the selection: not per
         # frame (86,000 strands: 21-46 ms each time, and the viewer uploads them only when they change).
         sel = self.session.vertex_selection
-        key = (id(g), self.color_mode, None if sel is None else hash(np.asarray(sel).tobytes()))
+        key = (self.color_mode, None if sel is None else hash(np.asarray(sel).tobytes()))
         if self._color_cache is None or self._color_cache[0] != key or self._color_cache[1] is not g:
             self._color_cache = (key, g, strand_colors(g, self.color_mode, selection=sel))
         return self._color_cache[2]

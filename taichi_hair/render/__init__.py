@@ -311,6 +311,10 @@ class ViewerGGUI:
     nothing.  Taichi must be initialised first (any arch; GGUI itself runs on Vulkan).
     """
 
+    #: Ambient light and the point light's level (above the eye), for GGUI's scene and the rasteriser alike [-].
+    AMBIENT = 0.45
+    DIFFUSE = 0.7
+
     def __init__(self, width: int = 640, height: int = 480, show_window: bool = False, title: str = "taichi-hair",
                  background=(0.12, 0.12, 0.14), line_width: float = 1.0, drawing: str = "auto"):
         import taichi as ti
@@ -342,6 +346,10 @@ class ViewerGGUI:
         self.vertex_position = None
         self.vertex_color = None
         self.edge_index = None
+        self._edge_key = None
+        #: The offsets and colour array of the last :meth:`set_strands` (what it can skip when they come again).
+        self._offsets_in = None
+        self._colors_in = None
         #: Highlighted points (selection, pins) [m] and colours, shape (P,), P = capacity.
         self.point_position = None
         self.point_color = None
@@ -364,46 +372,41 @@ class ViewerGGUI:
         import taichi as ti
 
         p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
-        same_colors = colors is getattr(self, "_colors_in", None) and self.vertex_color is not None
         c = np.ascontiguousarray(colors, dtype=np.float32).reshape(-1, 3)
         if c.shape[0] != p.shape[0]:
             raise ValueError(f"set_strands: {c.shape[0]} colours for {p.shape[0]} vertices")
-        # The same strands (offsets) and colours (the same array object) as the last call: upload the
-        # positions alone (the grooming window calls this every frame; 86,000 strands: ~20 ms saved).
-        off = np.asarray(strand_offsets)
-        last = getattr(self, "_offsets_in", None)
-        if last is not None and last.shape == off.shape and np.array_equal(last, off) and \
-                self.vertex_position is not None and self.vertex_position.shape[0] == p.shape[0] + (p.shape[0] % 2):
-            if p.shape[0] % 2:
-                p = np.vstack([p, p[-1:]])
-            self.vertex_position.from_numpy(p)
-            if not same_colors:
-                self.vertex_color.from_numpy(np.vstack([c, c[-1:]]) if c.shape[0] % 2 else c)
-                self._colors_in = colors
-            return
-        self._offsets_in = off.copy()
-        self._colors_in = colors
-        idx = edge_indices(strand_offsets)
         # GGUI cuts an odd vertex count to the even number below (even with an index buffer):
         # the fields hold an even count, one unused padding vertex if needed.
         n = p.shape[0] + (p.shape[0] % 2)
         if p.shape[0] % 2:
             p = np.vstack([p, p[-1:]])
             c = np.vstack([c, c[-1:]])
-        if self.vertex_position is None or self.vertex_position.shape[0] != n:
-            self.vertex_position = ti.Vector.field(3, ti.f32, n)
-            self.vertex_color = ti.Vector.field(3, ti.f32, n)
-        if self.edge_index is None or self.edge_index.shape[0] != idx.shape[0]:
-            self.edge_index = ti.field(ti.i32, max(idx.shape[0], 2))
-            self._edge_key = None
-        key = (idx.shape[0], hash(idx.tobytes()))
-        if getattr(self, "_edge_key", None) != key:
-            buf = np.zeros(self.edge_index.shape[0], dtype=np.int32)
-            buf[: idx.shape[0]] = idx
-            self.edge_index.from_numpy(buf)
-            self._edge_key = key
+        # The same strands (offsets) as the last call: the fields and edge indices stay, and the colours too when
+        # they are the same array object (the grooming window calls this every frame; 86,000 strands: ~40 ms).
+        off = np.asarray(strand_offsets)
+        same_strands = (self._offsets_in is not None and self._offsets_in.shape == off.shape
+                        and np.array_equal(self._offsets_in, off) and self.vertex_position is not None
+                        and self.vertex_position.shape[0] == n)
+        if not same_strands:
+            self._offsets_in = off.copy()
+            self._colors_in = None
+            idx = edge_indices(off)
+            if self.vertex_position is None or self.vertex_position.shape[0] != n:
+                self.vertex_position = ti.Vector.field(3, ti.f32, n)
+                self.vertex_color = ti.Vector.field(3, ti.f32, n)
+            if self.edge_index is None or self.edge_index.shape[0] != idx.shape[0]:
+                self.edge_index = ti.field(ti.i32, max(idx.shape[0], 2))
+                self._edge_key = None
+            key = (idx.shape[0], hash(idx.tobytes()))
+            if self._edge_key != key:
+                buf = np.zeros(self.edge_index.shape[0], dtype=np.int32)
+                buf[: idx.shape[0]] = idx
+                self.edge_index.from_numpy(buf)
+                self._edge_key = key
         self.vertex_position.from_numpy(p)
-        self.vertex_color.from_numpy(c)
+        if colors is not self._colors_in:
+            self.vertex_color.from_numpy(c)
+            self._colors_in = colors
 
     def set_positions_field(self, field) -> None:
         """Copy strand positions from a Taichi vector field (no host round trip); its size must be the
@@ -473,19 +476,19 @@ class ViewerGGUI:
 
     def render(self) -> None:
         """Draw one frame into the window's image (call :meth:`show` afterwards on screen)."""
+        c = self.camera_config
+        eye = np.asarray(c.eye)
+        light = tuple(eye + np.array([0.0, 0.5, 0.0]) * np.linalg.norm(eye - np.asarray(c.target)))  # [m]
         if self._raster is not None:
-            c = self.camera_config
-            self._raster.draw(self, projection_matrix(c, self.width / self.height) @ view_matrix(c))
+            self._raster.draw(self, projection_matrix(c, self.width / self.height) @ view_matrix(c), light,
+                              self.AMBIENT, self.DIFFUSE)
             if self.show_window:
                 self.canvas.set_image(self._raster.image)
             return
-        c = self.camera_config
         s = self.scene
         s.set_camera(self.ggui_camera(c))
-        s.ambient_light((0.45, 0.45, 0.45))
-        eye = np.asarray(c.eye)
-        s.point_light(pos=tuple(eye + np.array([0.0, 0.5, 0.0]) * np.linalg.norm(eye - np.asarray(c.target))),
-                      color=(0.7, 0.7, 0.7))
+        s.ambient_light((self.AMBIENT,) * 3)
+        s.point_light(pos=light, color=(self.DIFFUSE,) * 3)
         if self.head_vertex is not None:
             s.mesh(self.head_vertex, indices=self.head_index, normals=self.head_normal, color=self.head_color)
         if self.vertex_position is not None and self._edge_key[0] > 0:
@@ -500,8 +503,9 @@ class ViewerGGUI:
     def image(self) -> np.ndarray:
         """The last rendered frame as (height, width, 3) uint8, row 0 at the top."""
         if self._raster is not None and not self.show_window:
-            return self._raster.image_rgb8()  # (on screen: the window's own buffer, what it shows)
-        buf = self.window.get_image_buffer_as_numpy()  # (W, H, 4), first row at the bottom
+            buf = self._raster.image.to_numpy()  # (on screen: the window's own buffer below, what it shows)
+        else:
+            buf = self.window.get_image_buffer_as_numpy()  # (W, H, 4), first row at the bottom
         rgb = np.clip(buf[:, :, :3], 0.0, 1.0)
         return np.ascontiguousarray((np.flipud(rgb.transpose(1, 0, 2)) * 255.0 + 0.5).astype(np.uint8))
 

@@ -1,9 +1,10 @@
 """Strands, a head mesh and highlighted points drawn by Taichi kernels (``ViewerGGUI(drawing="raster")``).
 
-Why: on a CPU workstation GGUI's Vulkan device is Mesa's lavapipe, which rasterises the 1.1 M lines of
-86,000 render strands (14 vertices each) in ~600 ms per frame at 960 x 720 on 2 cores, of which ~590 ms are
-the lines (``benchmarks/bench_draw.py``, BENCHMARKS.md).  The same lines drawn here, by a parallel loop
-over edges on Taichi's CPU arch, take ~90 ms (same benchmark).  The picture is the one GGUI draws, to within
+Why: on a CPU workstation GGUI's Vulkan device is Mesa's lavapipe, which draws the 1.1 M lines of 86,000
+render strands (14 vertices each) with their head at 960 x 720 in 633-668 ms per frame on 2 cores, read-back
+included (``benchmarks/bench_groom.py --drawing lines``); without the lines the same frame took 9-12 ms (a probe,
+BENCHMARKS.md).  Drawn here, by a parallel loop over edges on Taichi's CPU arch: 90-92 ms (``--drawing
+raster``).  The picture is the one GGUI draws, to within
 the rasterisation rules: unlit hair lines of ``line_width`` pixels in their per-vertex colours (interpolated
 along each edge), a Gouraud-lit head (ambient plus one point light, as ``ViewerGGUI.render`` sets them) and
 points as lit disks; no anti-aliasing in either.
@@ -218,75 +219,62 @@ class Rasterizer:
         self.width, self.height = int(width), int(height)
         self.key = ti.field(ti.u64, (self.width, self.height))
         self.image = ti.Vector.field(3, ti.f32, (self.width, self.height))
-        self._screen = {}
+        self._fields = {}
+        # Stand-ins for what a frame does not have (no head, no strands, no points): the shading kernel reads
+        # none of them then, but takes a field for each.
+        self._none3 = ti.Vector.field(3, ti.f32, 1)
+        self._none_index = ti.field(ti.i32, 3)
 
-    def _screen_field(self, name: str, n: int):
-        """Screen positions of up to n points, grown in powers of two (each new field compiles the kernels
-        that take it again: a pin more must not)."""
-        f = self._screen.get(name)
+    def _field(self, name: str, n: int, components: int):
+        """Scratch field ``name`` of at least n entries (``components`` floats each), grown in powers of two (each
+        new field compiles the kernels that take it again: a pin more must not)."""
+        f = self._fields.get(name)
         if f is None or f.shape[0] < n:
-            f = ti.Vector.field(4, ti.f32, 1 << max(4, (max(n, 1) - 1).bit_length()))
-            self._screen[name] = f
+            size = 1 << max(4, (max(n, 1) - 1).bit_length())
+            f = ti.field(ti.f32, size) if components == 1 else ti.Vector.field(components, ti.f32, size)
+            self._fields[name] = f
         return f
 
-    def draw(self, viewer, mvp: np.ndarray) -> None:
+    def draw(self, viewer, mvp: np.ndarray, light, ambient: float, diffuse: float) -> None:
         """Draw the viewer's strands, head and points into :attr:`image`; ``mvp``: its camera's 4x4 world ->
-        clip matrix (``projection_matrix @ view_matrix`` of :mod:`taichi_hair.render`)."""
+        clip matrix (``projection_matrix @ view_matrix`` of :mod:`taichi_hair.render`); ``light``: the point
+        light's position [m]; ``ambient``, ``diffuse``: the head's light levels (those ``ViewerGGUI`` gives GGUI)."""
         cam = viewer.camera_config
         mvp = np.asarray(mvp, dtype=np.float32)
         M = ti.Matrix(mvp.tolist())
         near = float(cam.z_near)
-        eye = np.asarray(cam.eye, dtype=np.float64)
         _clear(self.key)
         tri_count = 0
-        tri_screen = tri_color = tri_index = None
+        tri_screen = point_screen = self._field("points", viewer.point_count, 4)
+        tri_color = edge_color = self._none3
+        tri_index = edge_index = self._none_index
         if viewer.head_vertex is not None and viewer.head_index.shape[0] >= 3:
             nv = viewer.head_vertex.shape[0]
-            tri_screen = self._screen_field("head", nv)
-            tri_color = self._screen.get("head_color")
-            if tri_color is None or tri_color.shape[0] < nv:
-                tri_color = self._screen["head_color"] = ti.Vector.field(3, ti.f32, nv)
+            tri_screen = self._field("head", nv, 4)
+            tri_color = self._field("head_color", nv, 3)
             tri_index = viewer.head_index
             tri_count = tri_index.shape[0] // 3
             _project(viewer.head_vertex, nv, M, self.width, self.height, near, tri_screen)
-            light = eye + np.array([0.0, 0.5, 0.0]) * np.linalg.norm(eye - np.asarray(cam.target))
-            _light_vertices(viewer.head_vertex, viewer.head_normal, nv, vec3(*eye), vec3(*light),
-                            vec3(*viewer.head_color), 0.45, 0.7, tri_color)
+            _light_vertices(viewer.head_vertex, viewer.head_normal, nv, vec3(*cam.eye), vec3(*light),
+                            vec3(*viewer.head_color), ambient, diffuse, tri_color)
             _draw_triangles(tri_screen, tri_index, tri_count, near, self.key)
         edge_count = 0
-        edge_screen = edge_index = edge_color = None
         if viewer.vertex_position is not None and viewer._edge_key[0] > 0:
             nv = viewer.vertex_position.shape[0]
-            edge_screen = self._screen_field("strands", nv)
+            edge_screen = self._field("strands", nv, 4)
             edge_index, edge_color = viewer.edge_index, viewer.vertex_color
             edge_count = viewer._edge_key[0] // 2
             _project(viewer.vertex_position, nv, M, self.width, self.height, near, edge_screen)
             width = max(1, int(round(viewer.line_width)))
             _draw_edges(edge_screen, edge_index, edge_count, tri_count, width, near, self.key)
-        point_screen = self._screen_field("points", viewer.point_count)
-        point_radius = self._screen.get("point_radius")
-        if point_radius is None or point_radius.shape[0] < point_screen.shape[0]:
-            point_radius = self._screen["point_radius"] = ti.field(ti.f32, point_screen.shape[0])
-        point_color = viewer.point_color
+        point_radius = self._field("point_radius", point_screen.shape[0], 1)
+        point_color = self._none3
         if viewer.point_count > 0:
+            point_color = viewer.point_color
             _project(viewer.point_position, viewer.point_count, M, self.width, self.height, near, point_screen)
             _point_radii(point_screen, viewer.point_count, viewer.point_radius, float(mvp[1, 1]) * 0.5 * self.height,
                          point_radius)
             _draw_points(point_screen, point_radius, viewer.point_count, tri_count + edge_count, viewer.point_radius,
                          near, self.key)
-        dummy3 = self._screen.get("dummy3")
-        if dummy3 is None:
-            dummy3 = self._screen["dummy3"] = ti.Vector.field(3, ti.f32, 1)
-            self._screen["dummy_index"] = ti.field(ti.i32, 3)
-        di = self._screen["dummy_index"]
-        _shade(self.key, vec3(*viewer.background),
-               tri_index if tri_index is not None else di, tri_screen if tri_screen is not None else point_screen,
-               tri_color if tri_color is not None else dummy3, tri_count,
-               edge_index if edge_index is not None else di, edge_color if edge_color is not None else dummy3,
-               edge_count, point_color if point_color is not None else dummy3, point_screen, point_radius,
-               self.image)
-
-    def image_rgb8(self) -> np.ndarray:
-        """:attr:`image` as (H, W, 3) uint8, row 0 at the top (as ``ViewerGGUI.image``)."""
-        rgb = self.image.to_numpy()
-        return np.ascontiguousarray((np.flipud(rgb.transpose(1, 0, 2)) * 255.0 + 0.5).astype(np.uint8))
+        _shade(self.key, vec3(*viewer.background), tri_index, tri_screen, tri_color, tri_count, edge_index,
+               edge_color, edge_count, point_color, point_screen, point_radius, self.image)
