@@ -306,6 +306,33 @@ def test_grooming_session_keeps_a_sag_free_groom_through_an_edit_and_a_new_gravi
     assert reopened.rest_pose_report()["strands_held"] == 8
 
 
+def test_grooming_rest_max_change_lets_the_session_hold_a_guide_the_default_leaves_to_sag():
+    """GroomingConfig.rest_max_change (RestPoseConfig.max_rest_change): a 15 cm horizontal guide of 9 vertices needs a
+    rest strain change of 1.65 (solve_rest_pose, measured) to hold its own weight, so the default 1.0 leaves it to
+    sag (> 1 mm after 60 quasistatic frames) while the 5 cm guide beside it is held; with 1.9 both guides are held
+    and every vertex stays within 1 um of its authored place (p90 and max).  Set in a running session, the rest
+    pose is solved again (both held; the state goes on from where it is).  A value <= 0 is a one-line error naming
+    the field."""
+    from taichi_hair.groom.config import GroomingConfig
+    from taichi_hair.groom.session import GroomingSession
+
+    polys = [horizontal(0.15, 9), horizontal(0.05, 21) + [0, 0, 0.01]]
+    reports = {}
+    for change in (1.0, 1.9):
+        s = GroomingSession(polys, GroomingConfig(rest_pose="sag-free", rest_max_change=change, guide_ratio=1.0,
+                                                  contacts=False))
+        s.advance(60)
+        reports[change] = s.rest_pose_report()
+    assert reports[1.0]["strands_held"] == 1 and reports[1.0]["drift_max_m"] > 1e-3
+    assert reports[1.9]["strands_held"] == 2
+    assert reports[1.9]["drift_p90_m"] < 1e-6 and reports[1.9]["drift_max_m"] < 1e-6
+    s.set_parameter("rest_max_change", 1.0)
+    s.advance(1)
+    assert s.rest_pose_report()["strands_held"] == 1
+    with pytest.raises(ValueError, match="rest_max_change"):
+        GroomingConfig(rest_max_change=0.0)
+
+
 def test_a_sag_free_grooming_edit_solves_only_the_edited_guides_and_equals_a_whole_solve(monkeypatch):
     """GroomingSession(rest_pose = "sag-free"): a length edit of one of eight guides solves the rest pose of that
     guide alone (``rest_pose_edit.resolve_rest_pose``: a Model of 1 strand is solved), and the session's rest

@@ -21,7 +21,7 @@ ACTIONS = ("select", "select_ray", "select_strands", "select_all", "simulate", "
     + EDIT_ACTIONS
 #: Parameters whose change updates the Model and solver coefficients (the others apply to the running solver).
 REBUILD_PARAMETERS = ("youngs_modulus", "radius", "density", "guide_ratio", "neighbour_count", "seed", "contacts",
-                      "contact_margin", "w0", "rest_pose")
+                      "contact_margin", "w0", "rest_pose", "rest_max_change")
 #: Of those, the ones that change the simulated layout (which strands are guides, the skinning
 #: slots, the contact pipeline): a new Model and solver are built and Taichi recompiles the kernels.
 #: The others update the Model in place (:meth:`Model.update`, no recompilation).
@@ -62,6 +62,13 @@ class GroomingConfig:
         rest_pose: ``"authored"`` (the groom's rest shape is its rest state: it sags under gravity) or
             ``"sag-free"`` (rest strains solved so that the rest shape is an equilibrium under gravity,
             :mod:`taichi_hair.solvers.rest_pose`; re-solved after every edit of the rest shape).
+        rest_max_change: with ``rest_pose = "sag-free"``, the largest change of a pair's rest strain from its
+            authored strain for a guide to count as held (``RestPoseConfig.max_rest_change``; a guide not held
+            keeps its authored rest pose and sags) [-].  At the paper's resolution (8,600 wavy guides x 14
+            vertices on ``assets/head.obj``, 19 mm edges) the default 1.0 holds 5,976 guides and 1.9 holds
+            8,236; the guides not held sag onto their neighbours and the quasistatic steps then push ~8,000
+            of their vertices ~0.5 mm into the neighbours and the correction back, every frame
+            (BENCHMARKS.md, "Why the groom never comes to rest").
         schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (strand on CPU, stage on GPU),
             ``"stage"`` or ``"strand"`` (SolverADMMConfig.schedule: same results, other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
@@ -81,12 +88,13 @@ class GroomingConfig:
     contact_margin: float = 1.0e-4
     w0: float = 1.0
     rest_pose: str = "authored"
+    rest_max_change: float = 1.0
     schedule: str = "auto"
     autosave_every: int = 1
     undo_limit: int = 100
 
     def __post_init__(self):
-        for name in ("youngs_modulus", "radius", "density", "w0"):
+        for name in ("youngs_modulus", "radius", "density", "w0", "rest_max_change"):
             v = getattr(self, name)
             if not (_finite(v) and v > 0):
                 raise ValueError(f"GroomingConfig.{name} must be a finite positive number, got {v!r}")

@@ -172,7 +172,7 @@ class GuideSimulation:
         guide_rest, material = guide_setup(g, cfg, guides)
         self.guides = np.asarray(guides)
         host, materials = _host_of(guide_builder(guide_rest, material))
-        before = (self._authored_host, self.rest_pose_result, self._rest_pose_gravity)
+        before = (self._authored_host, self.rest_pose_result, self._rest_pose_gravity, self._rest_max_change)
         self.model.update(host, materials)
         self._solve_rest_pose(cfg, before)
         self.apply_live_parameters(cfg)  # (the gravity the rest pose was solved for)
@@ -196,24 +196,28 @@ class GuideSimulation:
         (:mod:`taichi_hair.solvers.rest_pose`) and written into the Model; the result in
         ``rest_pose_result`` (None for an authored rest pose).  Call ``refresh_model`` after it.
 
-        ``before``: (authored host, result, gravity) of the last solve.  For the same gravity and layout only the
+        ``before``: (authored host, result, gravity, rest_max_change) of the last solve.  For the same gravity,
+        ``rest_max_change`` and layout only the
         guides whose authored host rows changed are solved again (``rest_pose_edit.resolve_rest_pose``; equal to a
         whole solve to rounding): an edit of 860 of 8,600 guides no longer solves all of them."""
-        from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
+        from ..solvers.rest_pose import RestPoseConfig, apply_rest_pose, solve_rest_pose
         from ..solvers.rest_pose_edit import changed_strands, resolve_rest_pose
 
         authored, gravity = self.model.host, tuple(float(v) for v in config.gravity)
         self._authored_host, self._rest_pose_gravity = authored, gravity
+        self._rest_max_change = config.rest_max_change
         self.rest_pose_result = None
         if config.rest_pose == "sag-free":
-            old_host, old_result, old_gravity = before or (None, None, None)
+            rest_config = RestPoseConfig(max_rest_change=config.rest_max_change)
+            old_host, old_result, old_gravity, old_change = before or (None, None, None, None)
             changed = None
-            if old_result is not None and old_gravity == gravity:
+            if old_result is not None and old_gravity == gravity and old_change == config.rest_max_change:
                 changed = changed_strands(old_host, authored)
             if changed is None:
-                result = solve_rest_pose(self.model, self.solver_config, gravity=gravity)
+                result = solve_rest_pose(self.model, self.solver_config, gravity=gravity, config=rest_config)
             else:
-                result = resolve_rest_pose(self.model, old_result, changed, self.solver_config, gravity=gravity)
+                result = resolve_rest_pose(self.model, old_result, changed, self.solver_config, gravity=gravity,
+                                           config=rest_config)
             self.rest_pose_result = result
             apply_rest_pose(self.model, result)
 
