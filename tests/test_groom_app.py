@@ -260,6 +260,12 @@ def test_bad_session_files_and_bad_grooms_are_one_line_errors(tmp_path, capsys):
         assert rc == 2 and "\n" not in err and "broken.hair" in err, err
     rc = main(["groom", str(groom_path), "--offscreen", "--out", str(tmp_path / "o")] + COMMON)
     assert rc == 2 and "--script" in capsys.readouterr().err
+    good = tmp_path / "good.json"
+    write_script(good, SCRIPT[:1])
+    rc = main(["groom", str(groom_path), "--offscreen", "--script", str(good), "--out", str(tmp_path / "o"),
+               "--rest-pose", "sag-free", "--rest-max-change", "0"] + COMMON)
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and "rest_max_change" in err, err
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):  # the window needs a display
         rc = main(["groom", str(groom_path)] + COMMON)
         err = capsys.readouterr().err.strip()

@@ -193,6 +193,8 @@ def session_config(groom, args):
             over["contacts"] = args.contacts == "on"
         if getattr(args, "rest_pose", None) is not None:
             over["rest_pose"] = args.rest_pose
+        if getattr(args, "rest_max_change", None) is not None:
+            over["rest_max_change"] = args.rest_max_change
         return replace(cfg, **over)
     except (TypeError, ValueError) as exc:
         raise CLIError(str(exc)) from None
@@ -320,6 +322,10 @@ def _add_session_options(p) -> None:
     p.add_argument("--rest-pose", choices=["authored", "sag-free"], default=None,
                    help="rest pose of the guides: 'authored' (default; they sag under gravity) or 'sag-free' "
                         "(the rest shape is solved to be an equilibrium, re-solved after every edit)")
+    p.add_argument("--rest-max-change", type=float, default=None,
+                   help="with --rest-pose sag-free: the largest change of a rest strain from the authored one for a "
+                        "guide to be held (default 1.0, ~60 degrees per vertex; 1.9 holds more guides of a coarse "
+                        "groom, the others keep their authored rest pose and sag)")
     p.add_argument("--arch", default="cpu", help="Taichi arch: cpu (default), cuda, gpu, vulkan")
 
 
