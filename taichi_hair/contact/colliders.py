@@ -354,6 +354,14 @@ class ColliderSet:
         if flat:
             self.sdf_value.from_numpy(np.concatenate(flat).astype(f))
 
+    def any_acting(self) -> bool:
+        """Does any collider act on a strand (``collider_strands`` not empty)?  The grooming comb is idle,
+        [0, 0), between strokes."""
+        if self.count == 0:
+            return False
+        rng = self.collider_strands.to_numpy()[: self.count]
+        return bool(np.any(rng[:, 1] > rng[:, 0]))
+
     def begin_step(self, control) -> None:
         """Take the end-of-step body transforms from ``control``; the begin-of-step ones are those of the
         previous step's end (on the first step: the current ones, i.e. no body motion in that step)."""

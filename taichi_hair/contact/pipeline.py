@@ -302,7 +302,7 @@ class ContactPipeline:
         it within reach; the hair of a dense pile can push it further within the step."""
         from .narrow import count_late_body_contacts, write_late_body_contacts
 
-        if self.colliders.count == 0:
+        if not self.colliders.any_acting():  # (none, or only the idle grooming comb: nothing to find)
             return 0
         m, con = self.model, self.con
         if self._late_count is None:
