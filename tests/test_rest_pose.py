@@ -563,6 +563,33 @@ def test_contact_support_rejects_bad_input():
         RestPoseConfig(support_for="some")
 
 
+def test_scene_rest_max_change_holds_a_strand_the_default_reports(tmp_path):
+    """[groom] rest_max_change (RestPoseConfig.max_rest_change): the 15 cm horizontal strand of 9 vertices needs a
+    rest strain change of 1.65 (measured), so the default 1.0 reports it as not held and 1.9 holds it (residual
+    below 1e-9 of its weight); 0 is a SceneError naming the key."""
+    from taichi_hair.io import save_groom
+    from taichi_hair.io.groom import Groom
+    from taichi_hair.scene.file import SceneError, load_scene
+
+    save_groom(Groom(points=horizontal(0.15, 9), strand_offsets=np.array([0, 9]), units="m"),
+               str(tmp_path / "strand.thair.npz"))
+    text = '[scene]\nframes = 1\n[groom]\nfile = "strand.thair.npz"\nrest_pose = "sag-free"\n{change}\n' \
+           '[solver]\ntype = "admm"\n'
+    held = {}
+    for i, change in enumerate(("", "rest_max_change = 1.9", "rest_max_change = 0")):
+        path = tmp_path / f"scene{i}.toml"
+        path.write_text(text.format(change=change))
+        if change.endswith("= 0"):
+            with pytest.raises(SceneError, match="rest_max_change"):
+                load_scene(str(path))
+            continue
+        scene = load_scene(str(path))
+        scene.build_model()
+        held[i] = scene.rest_pose_result
+    assert [s for s, _ in held[0].unheld] == [0]
+    assert not held[1].unheld and held[1].strand_residual.max() < 1e-9
+
+
 def test_scene_rest_pose_support_lets_a_floor_carry_a_strand_that_cannot_hold_itself(tmp_path):
     """[groom] rest_pose_support = "unheld": the scene's colliders carry the strands the sag-free solve cannot
     hold alone.  A 30 cm strand lying 1 um above a floor (plane collider, friction 0.3): without support it is

@@ -24,6 +24,7 @@ degrees; relative paths are relative to the scene file)::
     rest_pose_check = false      # sag-free: also find the held strands that are unstable equilibria (a 2 s run)
     rest_pose_support = "none"   # sag-free: "unheld" lets the colliders carry the strands that cannot hold
                                  # themselves (contact forces in the Coulomb cones), "all" every strand on them
+    rest_max_change = 1.0        # sag-free: largest rest strain change of a held strand (~60 degrees per vertex)
     scale = 0.0035               # file units -> metres (or units = "cm" / "mm" / "m" / "in")
     strands = 100                # optional: keep this many strands, evenly spaced through the file
     root = "clamped"             # "clamped" (roots follow `body`) or "free"
@@ -122,6 +123,7 @@ class Scene:
         rest_pose_check: also run ``check_stability`` after a sag-free solve ([groom] rest_pose_check).
         rest_pose_support: ``"none"``, ``"unheld"`` or ``"all"``: which strands the colliders may carry in the
             sag-free solve ([groom] rest_pose_support; :mod:`taichi_hair.solvers.rest_support`).
+        rest_max_change: the sag-free solve's ``RestPoseConfig.max_rest_change`` ([groom] rest_max_change).
         rest_pose_result: the :class:`~taichi_hair.solvers.rest_pose.RestPoseResult` of the last
             :meth:`build_model` of a sag-free scene (None otherwise).
     """
@@ -146,6 +148,7 @@ class Scene:
     rest_pose: str = "authored"
     rest_pose_check: bool = False
     rest_pose_support: str = "none"
+    rest_max_change: float = 1.0
     rest_pose_result: object = None
     #: Vertices a ``groom_builder`` will make (built-in scenes; 0 when unknown), for the size checks.
     vertex_count_hint: int = 0
@@ -206,9 +209,10 @@ class Scene:
                              f"model (Discrete Elastic Rods); the scene's solver is {self.solver!r}")
         from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
 
-        support, rcfg = None, None
+        from ..solvers.rest_pose import RestPoseConfig
+
+        support, rcfg = None, RestPoseConfig(max_rest_change=self.rest_max_change)
         if self.rest_pose_support != "none":
-            from ..solvers.rest_pose import RestPoseConfig
             from ..solvers.rest_support import support_from_colliders
 
             # Colliders on the roots' body share its frame; world colliders only while that body sits at
@@ -217,7 +221,7 @@ class Scene:
             at_origin = np.allclose(R, np.eye(3)) and np.allclose(t, 0.0)
             usable = [c for c in self.colliders if c.body == self.root_body or (c.body < 0 and at_origin)]
             support = support_from_colliders(model, usable)
-            rcfg = RestPoseConfig(support_for=self.rest_pose_support)
+            rcfg = RestPoseConfig(max_rest_change=self.rest_max_change, support_for=self.rest_pose_support)
         result = solve_rest_pose(model, self.solver_config, gravity=self._gravity_in_body(), config=rcfg,
                                  support=support)
         apply_rest_pose(model, result)
@@ -387,7 +391,8 @@ def scene_from_data(data: dict, path: str, base: str, overrides: dict | None = N
                   root=root, root_body=body, material=material, solver=kind, solver_config=cfg, colliders=colliders,
                   bodies=bodies, output=resolve_path(base, output) if output else "", description=desc,
                   rest_pose=gdesc.get("rest_pose", "authored"), rest_pose_check=bool(gdesc.get("rest_pose_check")),
-                  rest_pose_support=gdesc.get("rest_pose_support", "none"))
+                  rest_pose_support=gdesc.get("rest_pose_support", "none"),
+                  rest_max_change=float(gdesc.get("rest_max_change", 1.0)))
     if scene.rest_pose == "sag-free" and kind != "admm":
         raise SceneError(f"{path}: [groom] rest_pose: 'sag-free' is solved for the ADMM model; the scene's "
                          f"[solver] type is {kind!r}")

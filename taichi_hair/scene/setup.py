@@ -170,6 +170,9 @@ def groom_from_table(t: Table, base: str, overrides: dict, desc: dict):
                     f"must be 'none', 'unheld' or 'all', got {v!r}")
     if support != "none":
         desc["rest_pose_support"] = support
+    change = t.get("rest_max_change", "float", 1.0, positive)
+    if change != 1.0:
+        desc["rest_max_change"] = change
     desc.update(root=root, body=body)
     if rest_pose != "authored":  # (absent from the description otherwise: old checkpoints still resume)
         desc["rest_pose"] = rest_pose
