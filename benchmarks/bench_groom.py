@@ -26,7 +26,7 @@ grooming app's (``--numpy-huge-pages app``, default: NumPy's huge-page advice of
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
         [--contacts on|off] [--size 960 720] [--edit spread|region] [--rest-pose authored|sag-free]
-        [--rest-max-change 1.0]
+        [--rest-max-change X]
         [--numpy-huge-pages app|numpy] [--drawing auto|lines|raster] [--out FILE]
 
 JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>_contacts_<on|off>.json`` by default; a run
@@ -58,8 +58,9 @@ def main(argv=None):
     p.add_argument("--no-draw", action="store_true", help="skip the GGUI drawing (no Vulkan device)")
     p.add_argument("--rest-pose", choices=["authored", "sag-free"], default="authored",
                    help="GroomingConfig.rest_pose: sag-free solves the guides' rest pose at the build and after the edit")
-    p.add_argument("--rest-max-change", type=float, default=1.0,
-                   help="GroomingConfig.rest_max_change: the largest rest strain change of a held guide (sag-free)")
+    p.add_argument("--rest-max-change", type=float, default=None,
+                   help="GroomingConfig.rest_max_change: the largest rest strain change of a held guide (sag-free; "
+                        "default GroomingConfig's)")
     p.add_argument("--edit", choices=["spread", "region"], default="spread",
                    help="which 10 %% of the strands the edit takes: every 10th, or those rooted nearest one root")
     p.add_argument("--numpy-huge-pages", choices=("app", "numpy"), default="app",
@@ -84,7 +85,7 @@ def main(argv=None):
 
     res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
-           "schedule": args.schedule, "rest_pose": args.rest_pose, "rest_max_change": args.rest_max_change,
+           "schedule": args.schedule, "rest_pose": args.rest_pose,
            "numpy_huge_pages_off": huge_pages_off,
            "image": list(args.size), "date": datetime.date.today().isoformat()}
 
@@ -95,7 +96,8 @@ def main(argv=None):
     res["generate_s"] = sw.seconds
     cfg = GroomingConfig(iterations=args.iterations, guide_ratio=args.guide_ratio,
                          contacts=args.contacts == "on", autosave_every=0, schedule=args.schedule,
-                         rest_pose=args.rest_pose, rest_max_change=args.rest_max_change)
+                         rest_pose=args.rest_pose,
+                         **({} if args.rest_max_change is None else {"rest_max_change": args.rest_max_change}))
     session = GroomingSession(groom, cfg)
     with stopwatch(ti.sync) as sw:
         session._ensure_built()
@@ -105,6 +107,7 @@ def main(argv=None):
     res["simulated_vertices"] = int(sim.model.vertex_count)
     res["render_vertices"] = int(groom.vertex_count)
     if args.rest_pose == "sag-free":
+        res["rest_max_change"] = cfg.rest_max_change
         res["guides_held"] = int(session.rest_pose_report()["strands_held"])
     print(f"{arch}: {args.strands} strands x {args.vertices} vertices, {res['guides']} guides "
           f"({res['simulated_vertices']} simulated vertices); generated in {res['generate_s']:.1f} s, "

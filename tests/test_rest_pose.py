@@ -306,10 +306,11 @@ def test_grooming_session_keeps_a_sag_free_groom_through_an_edit_and_a_new_gravi
     assert reopened.rest_pose_report()["strands_held"] == 8
 
 
-def test_grooming_rest_max_change_lets_the_session_hold_a_guide_the_default_leaves_to_sag():
+def test_grooming_rest_max_change_lets_the_session_hold_a_guide_that_1_leaves_to_sag():
     """GroomingConfig.rest_max_change (RestPoseConfig.max_rest_change): a 15 cm horizontal guide of 9 vertices needs a
-    rest strain change of 1.65 (solve_rest_pose, measured) to hold its own weight, so the default 1.0 leaves it to
-    sag (> 1 mm after 60 quasistatic frames) while the 5 cm guide beside it is held; with 1.9 both guides are held
+    rest strain change of 1.65 (solve_rest_pose, measured) to hold its own weight, so 1.0 (RestPoseConfig's default)
+    leaves it to sag (> 1 mm after 60 quasistatic frames) while the 5 cm guide beside it is held; with 1.9 (the
+    grooming default) both guides are held
     and every vertex stays within 1 um of its authored place (p90 and max).  Set in a running session, the rest
     pose is solved again (both held; the state goes on from where it is).  A value <= 0 is a one-line error naming
     the field."""
@@ -317,6 +318,7 @@ def test_grooming_rest_max_change_lets_the_session_hold_a_guide_the_default_leav
     from taichi_hair.groom.session import GroomingSession
 
     polys = [horizontal(0.15, 9), horizontal(0.05, 21) + [0, 0, 0.01]]
+    assert GroomingConfig().rest_max_change == 1.9
     reports = {}
     for change in (1.0, 1.9):
         s = GroomingSession(polys, GroomingConfig(rest_pose="sag-free", rest_max_change=change, guide_ratio=1.0,

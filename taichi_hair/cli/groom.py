@@ -324,8 +324,8 @@ def _add_session_options(p) -> None:
                         "(the rest shape is solved to be an equilibrium, re-solved after every edit)")
     p.add_argument("--rest-max-change", type=float, default=None,
                    help="with --rest-pose sag-free: the largest change of a rest strain from the authored one for a "
-                        "guide to be held (default 1.0, ~60 degrees per vertex; 1.9 holds more guides of a coarse "
-                        "groom, the others keep their authored rest pose and sag)")
+                        "guide to be held (default 1.9 in grooming; 1.0 is ~60 degrees per vertex); the guides not "
+                        "held keep their authored rest pose and sag")
     p.add_argument("--arch", default="cpu", help="Taichi arch: cpu (default), cuda, gpu, vulkan")
 
 

@@ -64,11 +64,13 @@ class GroomingConfig:
             :mod:`taichi_hair.solvers.rest_pose`; re-solved after every edit of the rest shape).
         rest_max_change: with ``rest_pose = "sag-free"``, the largest change of a pair's rest strain from its
             authored strain for a guide to count as held (``RestPoseConfig.max_rest_change``; a guide not held
-            keeps its authored rest pose and sags) [-].  At the paper's resolution (8,600 wavy guides x 14
-            vertices on ``assets/head.obj``, 19 mm edges) the default 1.0 holds 5,976 guides and 1.9 holds
-            8,236; the guides not held sag onto their neighbours and the quasistatic steps then push ~8,000
-            of their vertices ~0.5 mm into the neighbours and the correction back, every frame
-            (BENCHMARKS.md, "Why the groom never comes to rest").
+            keeps its authored rest pose and sags) [-].  1.9 here (the grooming tool is where the authored shape
+            is the point), 1.0 (about 60 degrees per vertex) in ``RestPoseConfig`` and scene files.  Measured
+            at the paper's resolution (8,600 wavy guides x 14 vertices on ``assets/head.obj``, 19 mm edges):
+            1.0 holds 5,976 guides, 568 of them flagged unstable by ``check_stability``; 1.9 holds 8,236, 773
+            flagged (the same 9 %); the guides not held sag onto their neighbours, and the quasistatic steps
+            and the correction then fight over their near-root vertices every frame: 1,458 against 978 ms per
+            frame (BENCHMARKS.md, "Why the groom never comes to rest").
         schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (strand on CPU, stage on GPU),
             ``"stage"`` or ``"strand"`` (SolverADMMConfig.schedule: same results, other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
@@ -88,7 +90,7 @@ class GroomingConfig:
     contact_margin: float = 1.0e-4
     w0: float = 1.0
     rest_pose: str = "authored"
-    rest_max_change: float = 1.0
+    rest_max_change: float = 1.9
     schedule: str = "auto"
     autosave_every: int = 1
     undo_limit: int = 100
