@@ -284,10 +284,16 @@ def run_offscreen(args) -> int:
                "strands": session.groom.strand_count, "vertices": session.groom.vertex_count,
                "replay_s": replay_s, "rebuilds": session.rebuild_count, "updates": session.update_count,
                "timings": {k: [float(x) for x in v] for k, v in session.timings.items()}}
+    held = ""
+    if session.config.rest_pose == "sag-free":  # the equilibrium residual, guides held, drift (issue 14 item 2)
+        rep = session.rest_pose_report()
+        summary["rest_pose"] = json.loads(json.dumps(rep, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
+        held = (f"; sag-free: {rep['strands_held']}/{rep['guides']} guides held, drift p90 "
+                f"{1e3 * rep['drift_p90_m']:.3f} mm")
     with open(os.path.join(args.out, "summary.json"), "w", encoding="utf-8") as fh:
         json.dump(summary, fh, indent=1)
     print(f"replayed {len(session.log)} actions in {replay_s:.2f} s ({session.rebuild_count} builds, "
-          f"{session.update_count} in-place updates); wrote {len(frames)} frames, {out_groom}")
+          f"{session.update_count} in-place updates); wrote {len(frames)} frames, {out_groom}{held}")
     return 0
 
 
