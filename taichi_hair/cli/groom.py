@@ -287,11 +287,11 @@ def run_offscreen(args) -> int:
     held = ""
     if session.config.rest_pose == "sag-free":  # the equilibrium residual, guides held, drift (issue 14 item 2)
         rep = session.rest_pose_report()
-        summary["rest_pose"] = json.loads(json.dumps(rep, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
+        summary["rest_pose"] = rep
         held = (f"; sag-free: {rep['strands_held']}/{rep['guides']} guides held, drift p90 "
                 f"{1e3 * rep['drift_p90_m']:.3f} mm")
     with open(os.path.join(args.out, "summary.json"), "w", encoding="utf-8") as fh:
-        json.dump(summary, fh, indent=1)
+        json.dump(summary, fh, indent=1, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v))
     print(f"replayed {len(session.log)} actions in {replay_s:.2f} s ({session.rebuild_count} builds, "
           f"{session.update_count} in-place updates); wrote {len(frames)} frames, {out_groom}{held}")
     return 0

@@ -207,11 +207,9 @@ class Scene:
         if self.solver != "admm":
             raise SceneError(f"{self.path or self.name}: [groom] rest_pose: 'sag-free' is solved for the ADMM "
                              f"model (Discrete Elastic Rods); the scene's solver is {self.solver!r}")
-        from ..solvers.rest_pose import apply_rest_pose, solve_rest_pose
+        from ..solvers.rest_pose import RestPoseConfig, apply_rest_pose, solve_rest_pose
 
-        from ..solvers.rest_pose import RestPoseConfig
-
-        support, rcfg = None, RestPoseConfig(max_rest_change=self.rest_max_change)
+        support = None
         if self.rest_pose_support != "none":
             from ..solvers.rest_support import support_from_colliders
 
@@ -221,7 +219,8 @@ class Scene:
             at_origin = np.allclose(R, np.eye(3)) and np.allclose(t, 0.0)
             usable = [c for c in self.colliders if c.body == self.root_body or (c.body < 0 and at_origin)]
             support = support_from_colliders(model, usable)
-            rcfg = RestPoseConfig(max_rest_change=self.rest_max_change, support_for=self.rest_pose_support)
+        rcfg = RestPoseConfig(max_rest_change=self.rest_max_change,
+                              **({} if support is None else {"support_for": self.rest_pose_support}))
         result = solve_rest_pose(model, self.solver_config, gravity=self._gravity_in_body(), config=rcfg,
                                  support=support)
         apply_rest_pose(model, result)
