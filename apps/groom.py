@@ -342,6 +342,10 @@ def _panel(app, window):
     with gui.sub_window("taichi-hair groom", 0.0, 0.0, 0.28, 0.62) as w:
         w.text(f"frame {app.frame_ms:.1f} ms (simulation {app.sim_ms:.1f} ms)")
         w.text(f"{s.groom.strand_count} strands, {s.guide_strands.size} simulated")
+        if s.built and s.config.contacts:
+            q = s.quality(full=False)  # the last step's hair pairs (no pass over the groom)
+            w.text(f"hair pairs: {q.get('crossed_pairs', 0)} crossed, deepest "
+                   f"{1e6 * q.get('hair_penetration_max_m', 0.0):.0f} um ({q.get('contacts', 0)} contacts)")
         w.text(f"tool: {app.tool}  (1-5)")
         for i, t in enumerate(TOOLS):
             if w.button(f"{i + 1} {t}"):

@@ -290,11 +290,26 @@ def run_offscreen(args) -> int:
         summary["rest_pose"] = rep
         held = (f"; sag-free: {rep['strands_held']}/{rep['guides']} guides held, drift p90 "
                 f"{1e3 * rep['drift_p90_m']:.3f} mm")
+    q = summary["quality"] = session.quality()  # the guides at the end, and their worst step (hair pairs)
     with open(os.path.join(args.out, "summary.json"), "w", encoding="utf-8") as fh:
         json.dump(summary, fh, indent=1, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v))
     print(f"replayed {len(session.log)} actions in {replay_s:.2f} s ({session.rebuild_count} builds, "
           f"{session.update_count} in-place updates); wrote {len(frames)} frames, {out_groom}{held}")
+    print(quality_line(q))
     return 0
+
+
+def quality_line(q: dict) -> str:
+    """One line of a grooming session's ``quality()``: the guides' strain and hair pairs at the end, the worst step."""
+    body = (f"; {q['vertices_inside']} vertices inside the head (deepest {1e3 * q['body_penetration_max_m']:.2f} mm)"
+            if "vertices_inside" in q else "")
+    p99, deepest = q.get("hair_penetration_p99_m", 0.0), q.get("hair_penetration_max_m", 0.0)
+    pairs = (f"hair pairs p99 {1e6 * p99:.1f} um, max {1e6 * deepest:.0f} um, {q.get('crossed_pairs', 0)} crossed"
+             if q["hair_contacts"] else "no hair-hair contacts")
+    worst = (f"; worst of {q['steps']} steps: {q['crossed_pairs_worst']} crossed, deepest hair pair "
+             f"{1e6 * q['hair_penetration_max_m_worst']:.0f} um" if q["hair_contacts"] else "")
+    return (f"guides at the end: strain p99 {100 * q['strain_p99']:.3f} % (max {100 * q['strain_max']:.3f} %), {pairs}"
+            f"{body}, largest move of the last step {1e3 * q['max_step_motion_m']:.3f} mm{worst}")
 
 
 # =========================================================================== variants

@@ -91,6 +91,7 @@ def sweep(sim, positions: np.ndarray, radius: float, axis: np.ndarray, length: f
             t0 = time.perf_counter()
             control.body_translation[COMB_BODY] = q.tolist()
             solver.step(sim.state, control, 1.0)
+            sim.note_step()
             con = solver.contacts
             nc = con.contact_count
             if nc:

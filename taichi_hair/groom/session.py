@@ -127,8 +127,7 @@ class GroomingSession:
 
     @classmethod
     def open(cls, path, config: GroomingConfig | None = None, colliders=None, autosave: bool = True, **options):
-        """Load a groom file (``taichi_hair.io.load_groom``) and autosave beside it
-        (``<stem>.autosave.thair.npz`` and ``<stem>.autosave.session.json``)."""
+        """Load a groom file (``io.load_groom``); autosave beside it (``<stem>.autosave.thair.npz``, ``.session.json``)."""
         groom = load_groom(path, **options)
         return cls(groom, config, colliders, hist.autosave_path_for(path) if autosave else None)
 
@@ -147,9 +146,8 @@ class GroomingSession:
         """Selected strands (any vertex selected), bool, shape (strand_count,)."""
         return sel.strands_of(self._selection, self.groom.strand_offsets)
 
-    @property
-    def dragging(self) -> bool:
-        return self._drag is not None
+    dragging = property(lambda self: self._drag is not None)
+    built = property(lambda self: self._sim is not None, doc="Whether the guides' simulation exists (built, maybe stale).")
 
     @property
     def guide_strands(self) -> np.ndarray:
@@ -544,6 +542,11 @@ class GroomingSession:
                     time.perf_counter() - t0)
             self._write_back()
         self._record("advance", frames=frames)
+
+    def quality(self, full: bool = True) -> dict:
+        """Strain, hair-pair and head penetration, drift, the last step's move, the worst step (``GuideSimulation.quality``)."""
+        self._ensure_built()
+        return self._sim.quality(full)
 
     def rest_pose_report(self) -> dict:
         """Equilibrium residual, strands held, drift of the guides (:meth:`GuideSimulation.rest_pose_report`)."""

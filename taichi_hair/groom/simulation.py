@@ -37,6 +37,8 @@ from .config import COMB_BODY
 #: 2,248 ms per frame, 3 margins 2,097, 5 margins 1,969 (27-50 % of the edges search), 8 margins more pairs
 #: than the buffer holds (the skin is then given up, with a warning).
 PAIR_SKIN_MARGINS = 5.0
+#: ``GuideSimulation.quality_worst`` before any step.
+WORST_RESET = {"steps": 0, "crossed_pairs_worst": 0, "hair_penetration_max_m_worst": 0.0}
 
 
 def _host_of(builder) -> tuple[dict, list]:
@@ -157,6 +159,8 @@ class GuideSimulation:
         row_of[guide_vertex] = np.arange(guide_vertex.size)
         self.model, self.solver, self.state, self.control, self.skin = model, solver, state, control, skin
         self.comb_collider = len(colliders)
+        self.scene_colliders = list(colliders)
+        self.quality_worst = dict(WORST_RESET)
         self.guide_vertex, self.row_of, self.stale = guide_vertex, row_of, False
         self.base_fixed = model.host["vertex_is_fixed"].copy()
         self.base_body = model.host["vertex_body_position"].copy()
@@ -263,6 +267,55 @@ class GuideSimulation:
             self.body[self.drag_rows] = drag_position
             self.model.vertex_body_position.from_numpy(self.body.astype(self.np_float))
         self.solver.step(self.state, self.control, 1.0)
+        self.note_step()
+
+    def note_step(self) -> None:
+        """Fold the last solver step's hair-hair figures (``SolverADMM.contact_stats``, measured every step) into
+        ``quality_worst``: the most crossed pairs and the deepest hair pair of any step since the build or the
+        last :meth:`reset_worst` (every step of ``step`` and of a comb stroke calls it)."""
+        cs, w = self.solver.contact_stats, self.quality_worst
+        w["steps"] += 1
+        w["crossed_pairs_worst"] = max(w["crossed_pairs_worst"], int(cs.get("crossed_pairs", 0)))
+        w["hair_penetration_max_m_worst"] = max(w["hair_penetration_max_m_worst"],
+                                                float(cs.get("hair_penetration_max_m", 0.0)))
+
+    def reset_worst(self) -> None:
+        """Start ``quality_worst`` again (no step counted)."""
+        self.quality_worst = dict(WORST_RESET)
+
+    def quality(self, full: bool = True) -> dict:
+        """How good the guides' current frame is: :func:`taichi_hair.quality.frame_quality` of the State (edge
+        strain, penetration into the scene's bodies against their true surface, drift from the Model's authored
+        shape, the last step's hair-hair figures: penetration p99 and max, crossed pairs), and
+
+        * ``max_step_motion_m``: the largest move of a vertex in the last step [m] (quasistatic steps have no
+          velocity: a groom at rest moves ~0 per step);
+        * ``contacts``, ``correction_sweeps``: the last step's contact count and end-of-step correction sweeps;
+          ``hair_contacts``: whether hair-hair contacts are on (without them the hair-pair figures are 0);
+        * ``quality_worst``'s figures (``*_worst``, ``steps``): the worst step since the build (or a reset).
+
+        The idle comb is not a body here (it acts on no strand between strokes).  Strands are named by their
+        groom index.  ``full`` False: only the last step's contact figures and the worst step, which cost no pass
+        over the State (the grooming window's panel, every frame)."""
+        from ..quality import HAIR_KEYS, frame_quality
+
+        cs = dict(self.solver.contact_stats, hair_contacts=bool(self.solver.contacts.config.hair_hair))
+        if not full:
+            keys = HAIR_KEYS + ("contacts", "correction_sweeps", "hair_contacts")
+            return dict({k: cs[k] for k in keys if k in cs}, **self.quality_worst)
+        x = self.state.vertex_position.to_numpy()
+        x0 = self.solver.buf.vertex_position_begin.to_numpy()
+        q = frame_quality(x, np.zeros_like(x), self.model.host, self.scene_colliders, contact_stats=cs)
+        q.pop("max_speed_m_s")
+        for key in ("strain_worst_strand", "penetration_worst_strand"):  # Model strand -> groom strand
+            if q.get(key, -1) >= 0:
+                q[key] = int(self.guides[q[key]])
+        q["max_step_motion_m"] = float(np.max(np.linalg.norm(x - x0, axis=1))) if len(x) else 0.0
+        q["contacts"] = int(cs.get("contacts", 0))
+        q["correction_sweeps"] = int(cs.get("correction_sweeps", 0))
+        q["hair_contacts"] = cs["hair_contacts"]
+        q.update(self.quality_worst)
+        return q
 
     def positions(self, points: np.ndarray) -> np.ndarray:
         """A new current pose: the simulated guides (State) and the skinned strands, in the dtype of
