@@ -127,7 +127,7 @@ def main(argv=None):
 
     def frame():
         with stopwatch(ti.sync) as simulation:
-            sim.solver.step(sim.state, sim.control, 1.0)
+            sim.step()  # SolverADMM.step, and the step's hair-pair figures folded into the session's quality
         with stopwatch(ti.sync) as skinning:
             sim.skin.deform(sim.state, sim.control)
         with stopwatch(ti.sync) as drawing:
@@ -174,6 +174,13 @@ def _measure(args, res, frame, session, sim, groom, ti, out, viewer, bench):
     if sim.solver.contacts is not None:
         res["contact_stats_last_frame"] = {k: (float(v) if isinstance(v, (int, float, np.number)) else str(v))
                                            for k, v in dict(sim.solver.contact_stats).items()}
+    # What the measured frames are worth (GroomingSession.quality: strain, hair pairs, last step's move, worst step).
+    q = res["quality"] = session.quality()
+    print(f"quality after the measured frames: strain p99 {100 * q['strain_p99']:.4f} %, max {100 * q['strain_max']:.4f} %; "
+          f"hair pairs p99 {1e6 * q.get('hair_penetration_p99_m', 0.0):.1f} um, max "
+          f"{1e6 * q.get('hair_penetration_max_m', 0.0):.0f} um, {q.get('crossed_pairs', 0)} crossed (worst of "
+          f"{q['steps']} steps {q['crossed_pairs_worst']}); largest move of the last step "
+          f"{1e3 * q['max_step_motion_m']:.3f} mm; drift p90 {1e3 * q.get('drift_p90_m', 0.0):.3f} mm", flush=True)
 
     # An edit: grow 10 % of the strands; the next frame updates the Model in place.
     if args.edit == "spread":

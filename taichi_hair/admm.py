@@ -238,6 +238,11 @@ def assemble_position_at(
         w_z = buf.vertex_contact_weight[i]
         diag += w_z
         f += w_z * (buf.vertex_contact_target[i] - x[i])
+        # Attachment (``SolverADMM.set_attachments``): k (target - x), zero without one (exactly: adding 0 changes no
+        # bit, so a solver without attachments steps as before).
+        w_a = buf.vertex_attach_weight[i]
+        diag += w_a
+        f += w_a * (buf.vertex_attach_target[i] - x[i])
         buf.tri_lower[i] = lower
         buf.tri_diag[i] = diag
         buf.tri_upper[i] = upper
@@ -260,7 +265,8 @@ def assemble_position_system(
 ):
     """Assemble M_hat dx = f_hat of Eq. (3); the same tridiagonal matrix serves the three axes.
 
-    M = d2E_e/dx2 + W_z + B^T W_y B, f = -dE_e/dx + W_z (lambda_z + z - x) + B^T W_y (lambda_y + y - Bx).
+    M = d2E_e/dx2 + W_z + B^T W_y B, f = -dE_e/dx + W_z (lambda_z + z - x) + B^T W_y (lambda_y + y - Bx), plus the
+    attachments' k and k (target - x) (``SolverADMM.set_attachments``; not in the paper).
     B^T W_y B is an edge Laplacian whose edge weight is the sum of the weights
     of the (one or two) pairs containing the edge.  Kinematic vertices get an
     identity row and no coupling (the projections Pi_A of Eq. 3).

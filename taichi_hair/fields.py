@@ -137,6 +137,11 @@ class SolverCoefficients:
         #: Stretch stiffness E_s A e_j seen by one pair, halved when the edge belongs
         #: to two pairs (Sec. 4.4) [N m].
         self.edge_pair_stretch_stiffness = ti.field(float, n)
+        #: Zero-length spring of each vertex to a target, set by the caller (``SolverADMM.set_attachments``; the
+        #: grooming drag), not by the Model: weight k_i [N/m] (0: none) and target [m]; the position system gets
+        #: k_i on its diagonal and k_i (target - x_i) on its right-hand side.
+        self.vertex_attach_weight = ti.field(float, n)
+        self.vertex_attach_target = ti.field(vec3, n)
 
 
 class SolverWarmStart:

@@ -66,8 +66,7 @@ import taichi as ti
 
 from .solver_base import SolverBase, on_gpu
 from . import admm
-from .anderson import (ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_auto_window, anderson_begin,
-                       anderson_mix)
+from .anderson import ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_auto_window, anderson_begin, anderson_mix
 from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
 from .fields import SolverBuffers
@@ -371,9 +370,8 @@ class SolverADMM(SolverBase):
     def vertex_contact_state(self) -> np.ndarray:
         """Per vertex after the last step: 0 free, 1 sticking, 2 sliding [-], int8, shape (vertex_count,)
         (``ContactPipeline.vertex_states``; all 0 without contacts)."""
-        if self.contacts is None:
-            return np.zeros(self.model.vertex_count, np.int8)
-        return self.contacts.vertex_states(self.model.vertex_count)
+        n = self.model.vertex_count
+        return np.zeros(n, np.int8) if self.contacts is None else self.contacts.vertex_states(n)
 
     def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
                           t0: float) -> float:
@@ -484,9 +482,8 @@ class SolverADMM(SolverBase):
                                 state.vertex_position, state.edge_twist, state)
 
     def reset_duals(self) -> None:
-        """Forget what the solver carries from step to step for the state it stepped: the warm-started
-        elasticity multipliers and the BDF2 history (:meth:`reset_history`); call it after a teleport
-        or after loading another state."""
+        """Forget what the solver carries from step to step for the state it stepped: the warm-started elasticity
+        multipliers and the BDF2 history (:meth:`reset_history`); call it after a teleport or a load."""
         admm.reset_duals(self.buf)
         self.reset_history()
 
@@ -507,6 +504,17 @@ class SolverADMM(SolverBase):
     def reset_history(self) -> None:
         """Forget the BDF2 history: the next step is a backward Euler step (then BDF2 again)."""
         self._history_dt = None
+
+    def set_attachments(self, vertices, targets, weights) -> None:
+        """Zero-length springs k_i (target_i - x_i) on ``vertices`` only, from the next step on (targets [m], (k, 3);
+        k_i [N/m], (k,) or one), in the position system (``admm.assemble_position_at``; the grooming drag)."""
+        v, t, k = np.asarray(vertices, np.int64), np.asarray(targets, np.float64), np.asarray(weights, np.float64)
+        if t.shape != (v.size, 3) or not (np.all(np.isfinite(t)) and np.all(np.isfinite(k)) and np.all(k >= 0)):
+            raise ValueError(f"set_attachments: {v.size} finite targets (k, 3) and weights >= 0 expected")
+        weight, target = np.zeros(self.model.vertex_count), np.zeros((self.model.vertex_count, 3))
+        weight[v], target[v] = k, t
+        self.buf.vertex_attach_weight.from_numpy(weight.astype(_np_float()))
+        self.buf.vertex_attach_target.from_numpy(target.astype(_np_float()))
 
     def checkpoint(self) -> dict:
         """What the solver carries from one step to the next, as NumPy arrays.
@@ -574,12 +582,9 @@ class SolverADMM(SolverBase):
 
     # ------------------------------------------------------------------ diagnostics
     def energy(self, state: State, control: Control) -> dict:
-        """Elastic and gravitational energies of ``state`` [J] (host-side, float64).
-
-        Bending uses the solver's discretisation (bending Voronoi lengths);
-        stretching the full per-edge stiffness.  Returns a dict with keys
-        ``bend``, ``stretch``, ``gravity``, ``total``.
-        """
+        """Elastic and gravitational energies of ``state`` [J] (host-side, float64; attachments left out): bending
+        in the solver's discretisation (bending Voronoi lengths), stretching with the full per-edge stiffness.
+        Returns a dict with keys ``bend``, ``stretch``, ``gravity``, ``total``."""
         m, b = self.model, self.buf
         kappa, eps = self._diag_kappa, self._diag_strain
         admm.compute_strains(self.measure, m.edge, m.pair, state.vertex_position, state.edge_twist, state, kappa, eps)

@@ -14,12 +14,12 @@ Editing actions are methods, each logged with its parameters (``session.log``, w
 * selection (:mod:`taichi_hair.groom.selection`): :meth:`select` (a sphere), :meth:`select_ray` (a screen
   ray: a cylinder of the given radius around a half-line), :meth:`select_strands`, :meth:`select_all`;
   ``mode`` is "replace", "add" or "remove".
-* :meth:`drag` -- direct manipulation.  The solver has no per-vertex external force, so a drag makes the
-  grabbed vertices *kinematic* (``vertex_is_fixed`` of the Model, the mechanism that clamps roots) and,
-  every frame before the step, moves their prescribed position a fraction ``stiffness`` of the way to the
-  moving target (anchor + ``target_offset``): an overdamped spring seen frame by frame, with time constant
-  -1/ln(1 - stiffness) frames.  The rest of each strand follows through elasticity and contacts.
-  :meth:`release` ends it.
+* :meth:`drag` -- direct manipulation by "spring-like forces" (Sec. 5.3): every frame before the step, each
+  grabbed vertex's target moves a fraction ``stiffness`` of the way to anchor + ``target_offset`` (an
+  overdamped approach, time constant -1/ln(1 - stiffness) frames), and a zero-length spring with a contact's
+  weight pulls the vertex to it (``SolverADMM.set_attachments``); the vertices stay free, so contacts stop
+  them at the head and at other hair (kinematic, as before 2026-12-06, they went through both).  The rest of
+  each strand follows through elasticity and contacts.  :meth:`release` ends it.
 * :meth:`comb` sweeps a comb (a frictional capsule collider on its own body, Sec. 4.5) along a path through
   the hair; the strands it touched keep the combed shape as their rest pose (:mod:`taichi_hair.groom.comb`).
 * :meth:`trim` cuts the strands whose *current* polyline crosses a plane (the cut seen on screen); the same
@@ -390,9 +390,9 @@ class GroomingSession:
         return sel.grabbable(mask, self.groom.strand_offsets, self._proxy())
 
     def drag(self, target_offset, stiffness=0.5) -> None:
-        """Pull the selected vertices toward anchor + ``target_offset`` [m] (anchor: their position
-        when the drag began); each frame they move ``stiffness`` in (0, 1] of the remaining way.
-        Call again with a new offset to move the target; :meth:`release` ends the drag."""
+        """Pull the selected vertices toward anchor + ``target_offset`` [m] (anchor: their position when the drag
+        began): each frame their targets move ``stiffness`` in (0, 1] of the remaining way, and springs pull the
+        vertices to them (``GuideSimulation.drag_springs``: contacts stop them).  :meth:`release` ends the drag."""
         off = _vec3("target_offset", target_offset)
         s = _positive("stiffness", stiffness)
         if s > 1.0:

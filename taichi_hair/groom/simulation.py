@@ -37,6 +37,8 @@ from .config import COMB_BODY
 #: 2,248 ms per frame, 3 margins 2,097, 5 margins 1,969 (27-50 % of the edges search), 8 margins more pairs
 #: than the buffer holds (the skin is then given up, with a warning).
 PAIR_SKIN_MARGINS = 5.0
+#: The drag's spring weight in units of a contact's weight on the same vertex (``GuideSimulation.drag_springs``) [-].
+DRAG_WEIGHT = 1.0
 #: ``GuideSimulation.quality_worst`` before any step.
 WORST_RESET = {"steps": 0, "crossed_pairs_worst": 0, "hair_penetration_max_m_worst": 0.0}
 
@@ -115,9 +117,9 @@ class GuideSimulation:
         row_of: Model vertex of each groom vertex, -1 off the guides, int64 (vertex_count,).
         stale: the rest shapes or materials changed; :meth:`update` before the next step.
         base_fixed, base_body: ``vertex_is_fixed`` and ``vertex_body_position`` of the Model
-            without pins and drag (clamped roots only).
+            without pins (clamped roots only).
         body: the prescribed positions uploaded last [m], float64 (guide vertex count, 3).
-        drag_rows: Model vertices of the drag, int64.
+        drag_rows: Model vertices of the drag (held by springs, :meth:`drag_springs`), int64.
         np_float: NumPy dtype of Taichi's ``default_fp``.
     """
 
@@ -242,30 +244,43 @@ class GuideSimulation:
             self.solver.prime_duals(self.state, self.control)
 
     def set_kinematics(self, pinned=None, pinned_positions=None, drag_vertices=None, drag_position=None) -> None:
-        """Write vertex_is_fixed / vertex_body_position: clamped roots, the pinned groom vertices
-        ``pinned`` (guide vertices) at ``pinned_positions`` [m], and the drag (groom vertices
-        ``drag_vertices`` at ``drag_position`` [m]).  Body 0 stays the identity."""
+        """Write vertex_is_fixed / vertex_body_position (clamped roots, and the pinned groom vertices ``pinned``
+        (guide vertices) at ``pinned_positions`` [m]; body 0 stays the identity) and the drag: the groom vertices
+        ``drag_vertices`` held by springs to ``drag_position`` [m] (:meth:`drag_springs`)."""
         fixed = self.base_fixed.copy()
         body = self.base_body.copy()
         if pinned is not None:
             rows = self.row_of[pinned]
             fixed[rows] = 1
             body[rows] = pinned_positions.astype(np.float64)
-        self.drag_rows = np.zeros(0, dtype=np.int64)
-        if drag_vertices is not None:
-            self.drag_rows = self.row_of[drag_vertices]
-            fixed[self.drag_rows] = 1
-            body[self.drag_rows] = drag_position
+        self.drag_rows = np.zeros(0, dtype=np.int64) if drag_vertices is None else self.row_of[drag_vertices]
         self.body = body
         self.model.vertex_is_fixed.from_numpy(fixed.astype(np.int32))
         self.model.vertex_body_position.from_numpy(body.astype(self.np_float))
+        self.drag_springs(drag_position)
+
+    def drag_springs(self, drag_position=None) -> None:
+        """Hold the drag's vertices (``drag_rows``) at ``drag_position`` [m] by zero-length springs
+        (``SolverADMM.set_attachments``), the "spring-like forces" of the paper's direct manipulation (Sec. 5.3):
+        the dragged hair stays free, so the contacts and the end-of-step correction keep it out of the head and
+        out of the other hair it is pulled against (held kinematically, it went through both: a strand tip
+        dragged into a 3.5 cm sphere ended 34 mm inside it).  Each spring has the weight of a contact on its
+        vertex, k_i = m_i / dt~_i^2 (the quasistatic W_z of Sec. 4.5, dt~ the bending time of one edge): in free
+        space the vertex follows its target to ~1e-4 of the pull; where a contact stops it, the correction
+        keeps it outside."""
+        con = self.solver.contacts
+        rows = self.drag_rows
+        if drag_position is None or rows.size == 0:
+            self.solver.set_attachments(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
+            return
+        k = DRAG_WEIGHT * con.vertex_weight_base.to_numpy()[rows].astype(np.float64) / con.vertex_dt_bend.to_numpy()[rows] ** 2
+        self.solver.set_attachments(rows, np.asarray(drag_position, np.float64), k)
 
     def step(self, drag_position=None) -> None:
         """One quasistatic step (``config.iterations`` ADMM iterations); ``drag_position`` [m], if
-        given, are the drag's new prescribed positions (the rows of :meth:`set_kinematics`)."""
+        given, are the drag's new targets (the rows of :meth:`set_kinematics`)."""
         if drag_position is not None:
-            self.body[self.drag_rows] = drag_position
-            self.model.vertex_body_position.from_numpy(self.body.astype(self.np_float))
+            self.drag_springs(drag_position)
         self.solver.step(self.state, self.control, 1.0)
         self.note_step()
 
