@@ -59,6 +59,42 @@ def test_converged_sag_equals_exact_discrete_solution(rescale):
         assert drop / continuum - 1 < -0.1
 
 
+def test_an_attachment_spring_meets_the_discrete_cantilever_it_pulls():
+    """``SolverADMM.set_attachments``: without gravity, the tip of a clamped straight rod pulled by a zero-length spring
+    of weight k toward a target delta to the side.  A tip load P deflects the discrete rod by w = c P with
+    c = sum_k (s_N - s_k)^2 v_k / (E I) (hinges k = 1..N-1 as in ``discrete_linear_tip_deflection``, v_k with the
+    Voronoi rescaling), and the spring loads it by P = k (delta - w), so w = delta c k / (1 + c k): delta / 2 for
+    k = 1 / c.  Converged quasistatic run, small deflection (delta = 1e-4 L); tolerance 1e-4 (measured 5e-7: the
+    model is linear in delta here, so only single precision separates them).
+    Clearing the attachments lets the rod spring back straight."""
+    L, N = 0.02, 16
+    b = GroomBuilder()
+    b.add_strand(straight(L, N + 1), HAIR)
+    model = b.finalize()
+    h = L / N
+    s = np.arange(N + 1) * h
+    v = np.full(N + 1, h)
+    v[1] = v[N - 1] = 1.5 * h
+    ei = HAIR.youngs_modulus_bend * math.pi * HAIR.radius**4 / 4
+    c = sum((s[N] - s[k]) ** 2 * v[k] for k in range(1, N)) / ei
+    delta = 1e-4 * L
+    st, ctl = model.state(), model.control()
+    ctl.gravity = (0.0, 0.0, 0.0)
+    solver = SolverADMM(model, SolverADMMConfig(iterations=250, mode="quasistatic", w0=0.2))
+    tip0 = st.positions()[N].astype(np.float64)
+    solver.set_attachments([N], [tip0 + [0.0, delta, 0.0]], 1.0 / c)
+    for _ in range(12):
+        solver.step(st, ctl, 1.0)
+    w = float(st.positions()[N, 1]) - tip0[1]
+    assert abs(w / (delta / 2) - 1) < 1e-4, (w, delta / 2)
+    solver.set_attachments([], np.zeros((0, 3)), [])
+    for _ in range(12):
+        solver.step(st, ctl, 1.0)
+    assert abs(float(st.positions()[N, 1]) - tip0[1]) < 1e-3 * delta
+    with pytest.raises(ValueError, match="set_attachments"):
+        solver.set_attachments([N], [[0.0, float("nan"), 0.0]], 1.0)
+
+
 def test_large_deflection_matches_heavy_elastica():
     """Gamma = 6.8 (10 cm hair, 40 edges): H/W within 1% of the scipy elastica, in f32."""
     L = 0.1
