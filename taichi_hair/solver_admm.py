@@ -368,8 +368,7 @@ class SolverADMM(SolverBase):
         self._tock("end", t0)
 
     def vertex_contact_state(self) -> np.ndarray:
-        """Per vertex after the last step: 0 free, 1 sticking, 2 sliding [-], int8, shape (vertex_count,)
-        (``ContactPipeline.vertex_states``; all 0 without contacts)."""
+        """Per vertex after the last step: 0 free, 1 sticking, 2 sliding, int8 (vertex_count,); all 0 without contacts."""
         n = self.model.vertex_count
         return np.zeros(n, np.int8) if self.contacts is None else self.contacts.vertex_states(n)
 
@@ -509,12 +508,13 @@ class SolverADMM(SolverBase):
         """Zero-length springs k_i (target_i - x_i) on ``vertices`` only, from the next step on (targets [m], (k, 3);
         k_i [N/m], (k,) or one), in the position system (``admm.assemble_position_at``; the grooming drag)."""
         v, t, k = np.asarray(vertices, np.int64), np.asarray(targets, np.float64), np.asarray(weights, np.float64)
-        if t.shape != (v.size, 3) or not (np.all(np.isfinite(t)) and np.all(np.isfinite(k)) and np.all(k >= 0)):
-            raise ValueError(f"set_attachments: {v.size} finite targets (k, 3) and weights >= 0 expected")
-        weight, target = np.zeros(self.model.vertex_count), np.zeros((self.model.vertex_count, 3))
+        n = self.model.vertex_count
+        if (v.ndim != 1 or np.any((v < 0) | (v >= n)) or t.shape != (v.size, 3) or k.shape not in ((), v.shape)
+                or not (np.all(np.isfinite(t)) and np.all(np.isfinite(k)) and np.all(k >= 0))):
+            raise ValueError(f"set_attachments: vertices in [0, {n}), one finite target each and weights >= 0 expected")
+        weight, target = np.zeros(n, _np_float()), np.zeros((n, 3), _np_float())
         weight[v], target[v] = k, t
-        self.buf.vertex_attach_weight.from_numpy(weight.astype(_np_float()))
-        self.buf.vertex_attach_target.from_numpy(target.astype(_np_float()))
+        self.buf.vertex_attach_weight.from_numpy(weight), self.buf.vertex_attach_target.from_numpy(target)
 
     def checkpoint(self) -> dict:
         """What the solver carries from one step to the next, as NumPy arrays.

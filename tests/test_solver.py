@@ -91,8 +91,10 @@ def test_an_attachment_spring_meets_the_discrete_cantilever_it_pulls():
     for _ in range(12):
         solver.step(st, ctl, 1.0)
     assert abs(float(st.positions()[N, 1]) - tip0[1]) < 1e-3 * delta
-    with pytest.raises(ValueError, match="set_attachments"):
-        solver.set_attachments([N], [[0.0, float("nan"), 0.0]], 1.0)
+    for bad in (([N], [[0.0, float("nan"), 0.0]], 1.0), ([N + 1], [[0.0, 0.0, 0.0]], 1.0), ([-1], [[0.0, 0.0, 0.0]], 1.0),
+                ([N], [[0.0, 0.0, 0.0]], -1.0), ([N], [[0.0, 0.0, 0.0]], [1.0, 2.0])):
+        with pytest.raises(ValueError, match=r"set_attachments: vertices in \[0, 17\)"):
+            solver.set_attachments(*bad)
 
 
 def test_large_deflection_matches_heavy_elastica():

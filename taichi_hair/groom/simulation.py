@@ -289,17 +289,13 @@ class GuideSimulation:
 
     def note_step(self) -> None:
         """Fold the last solver step's hair-hair figures (``SolverADMM.contact_stats``, measured every step) into
-        ``quality_worst``: the most crossed pairs and the deepest hair pair of any step since the build or the
-        last :meth:`reset_worst` (every step of ``step`` and of a comb stroke calls it)."""
+        ``quality_worst``: the most crossed pairs and the deepest hair pair of any step since the build (every
+        step of ``step`` and of a comb stroke calls it)."""
         cs, w = self.solver.contact_stats, self.quality_worst
         w["steps"] += 1
         w["crossed_pairs_worst"] = max(w["crossed_pairs_worst"], int(cs.get("crossed_pairs", 0)))
         w["hair_penetration_max_m_worst"] = max(w["hair_penetration_max_m_worst"],
                                                 float(cs.get("hair_penetration_max_m", 0.0)))
-
-    def reset_worst(self) -> None:
-        """Start ``quality_worst`` again (no step counted)."""
-        self.quality_worst = dict(WORST_RESET)
 
     def quality(self, full: bool = True) -> dict:
         """How good the guides' current frame is: :func:`taichi_hair.quality.frame_quality` of the State (edge
@@ -310,7 +306,7 @@ class GuideSimulation:
           velocity: a groom at rest moves ~0 per step);
         * ``contacts``, ``correction_sweeps``: the last step's contact count and end-of-step correction sweeps;
           ``hair_contacts``: whether hair-hair contacts are on (without them the hair-pair figures are 0);
-        * ``quality_worst``'s figures (``*_worst``, ``steps``): the worst step since the build (or a reset).
+        * ``quality_worst``'s figures (``*_worst``, ``steps``): the worst step since the build.
 
         The idle comb is not a body here (it acts on no strand between strokes).  Strands are named by their
         groom index.  ``full`` False: only the last step's contact figures and the worst step, which cost no pass
