@@ -90,6 +90,19 @@ def _analytic_signed_distance(c, p) -> np.ndarray:
     raise TypeError(type(c).__name__)
 
 
+def static_signed_distance(colliders, points) -> np.ndarray:
+    """The smallest signed distance [m] of world points (N, 3) to colliders that do not move (body -1, or a body
+    whose transform is the identity, as in a grooming session): analytic for planes, spheres and capsules, the voxel
+    SDF for meshes (the solver's distance; +inf with no collider)."""
+    from .contact.colliders import MeshCollider
+
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    d = np.full(len(p), np.inf)
+    for c in colliders:
+        d = np.minimum(d, c.sdf_numpy(p) if isinstance(c, MeshCollider) else _analytic_signed_distance(c, p))
+    return d
+
+
 def mesh_penetration_depth(collider, points_body) -> np.ndarray:
     """Depth [m] of body-frame points (N, 3) inside a :class:`~taichi_hair.contact.colliders.MeshCollider`'s true
     surface, 0 where outside (see the module docstring for the two stages)."""

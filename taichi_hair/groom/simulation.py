@@ -46,6 +46,28 @@ DRAG_WEIGHT = 1.0
 WORST_RESET = {"steps": 0, "crossed_pairs_worst": 0, "hair_penetration_max_m_worst": 0.0}
 
 
+def reachable_targets(colliders, x, target, clearance, iterations: int = 24) -> np.ndarray:
+    """Drag targets (k, 3) [m] moved out of the scene's bodies: a target closer than ``clearance`` (k,) [m] to a body
+    (:func:`taichi_hair.quality.static_signed_distance`) becomes the farthest point of the segment from the vertex's
+    position ``x`` (k, 3) to it that keeps the clearance (bisection, ``iterations`` halvings); a vertex itself inside
+    keeps its place.  Why: a spring pulled toward a point deep inside the head drew the iterate halfway there every
+    step, where the SDF's gradient says little, and the correction threw the vertex 6-29 mm about the head's surface
+    each frame (a lock of the generated groom dragged toward the head's centre, BENCHMARKS.md)."""
+    from ..quality import static_signed_distance
+
+    out = np.array(target, np.float64)
+    deep = np.nonzero(static_signed_distance(colliders, out) < clearance)[0]
+    if deep.size:
+        a, b, c = np.array(x, np.float64)[deep], out[deep], clearance[deep]
+        held = static_signed_distance(colliders, a) < c
+        for _ in range(iterations):
+            m = 0.5 * (a + b)
+            ok = (static_signed_distance(colliders, m) >= c)[:, None]
+            a, b = np.where(ok, m, a), np.where(ok, b, m)
+        out[deep] = np.where(held[:, None], np.array(x, np.float64)[deep], a)
+    return out
+
+
 def _host_of(builder) -> tuple[dict, list]:
     """``(host, materials)`` that ``builder.finalize()`` would give its Model, without allocating
     the Model's Taichi fields (allocating them would make Taichi compile the kernels again).
@@ -270,14 +292,19 @@ class GuideSimulation:
         3.5 cm sphere's centre ended 32.5 mm inside it).  Each spring has ``DRAG_WEIGHT`` times the weight of a
         contact on its vertex, k_i = m_i / dt~_i^2 (the quasistatic W_z of Sec. 4.5, dt~ the bending time of one
         edge): in free space the vertex trails its target by its strand's pull over k (1.96 mm for the tests' 10 cm
-        strands pulled 3 cm); where a contact stops it, the correction keeps it outside."""
+        strands pulled 3 cm); where a contact stops it, the correction keeps it outside.  A target inside a body is
+        replaced by the point where the straight way to it from the vertex meets the body (:func:`reachable_targets`)."""
         con = self.solver.contacts
         rows = self.drag_rows
         if drag_position is None or rows.size == 0:
             self.solver.set_attachments(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
             return
         k = DRAG_WEIGHT * con.vertex_weight_base.to_numpy()[rows].astype(np.float64) / con.vertex_dt_bend.to_numpy()[rows] ** 2
-        self.solver.set_attachments(rows, np.asarray(drag_position, np.float64), k)
+        target = np.asarray(drag_position, np.float64)
+        if self.scene_colliders:
+            target = reachable_targets(self.scene_colliders, self.state.vertex_position.to_numpy()[rows], target,
+                                       con.vertex_radius.to_numpy()[rows].astype(np.float64))
+        self.solver.set_attachments(rows, target, k)
 
     def step(self, drag_position=None) -> None:
         """One quasistatic step (``config.iterations`` ADMM iterations); ``drag_position`` [m], if
