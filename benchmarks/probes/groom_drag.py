@@ -11,7 +11,9 @@ position) with ``--stiffness`` for ``--frames`` frames, then releases them for `
 frame: its time, the correction's sweeps, the hair pairs crossed and the hair-pair penetration p99 / max of the step
 (``GroomingSession.quality``); after the drag, how far the selected vertices moved along the drag (their targets
 moved offset (1 - (1 - stiffness)^frames)).  ``--correction-cap`` sets ``ContactConfig.correction_max_iterations``
-of the session's solver.  A diagnostic, not a benchmark: one run, the frame times are those of a shared machine.
+of the session's solver.  The crossed pairs are those of the pairs within reach at each step's beginning: a strand
+pulled farther than that in one step can pass through another unseen.  A diagnostic, not a benchmark: one run, the
+frame times are those of a shared machine.
 """
 
 from __future__ import annotations
