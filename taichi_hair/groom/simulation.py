@@ -58,13 +58,13 @@ def reachable_targets(colliders, x, target, clearance, iterations: int = 24) -> 
     out = np.array(target, np.float64)
     deep = np.nonzero(static_signed_distance(colliders, out) < clearance)[0]
     if deep.size:
-        a, b, c = np.array(x, np.float64)[deep], out[deep], clearance[deep]
-        held = static_signed_distance(colliders, a) < c
+        start, c = np.asarray(x, np.float64)[deep], clearance[deep]
+        a, b = start, out[deep]
         for _ in range(iterations):
             m = 0.5 * (a + b)
             ok = (static_signed_distance(colliders, m) >= c)[:, None]
             a, b = np.where(ok, m, a), np.where(ok, b, m)
-        out[deep] = np.where(held[:, None], np.array(x, np.float64)[deep], a)
+        out[deep] = np.where((static_signed_distance(colliders, start) < c)[:, None], start, a)
     return out
 
 
@@ -143,7 +143,6 @@ class GuideSimulation:
         stale: the rest shapes or materials changed; :meth:`update` before the next step.
         base_fixed, base_body: ``vertex_is_fixed`` and ``vertex_body_position`` of the Model
             without pins (clamped roots only).
-        body: the prescribed positions uploaded last [m], float64 (guide vertex count, 3).
         drag_rows: Model vertices of the drag (held by springs, :meth:`drag_springs`), int64.
         np_float: NumPy dtype of Taichi's ``default_fp``.
     """
@@ -191,7 +190,6 @@ class GuideSimulation:
         self.guide_vertex, self.row_of, self.stale = guide_vertex, row_of, False
         self.base_fixed = model.host["vertex_is_fixed"].copy()
         self.base_body = model.host["vertex_body_position"].copy()
-        self.body = None
         self.drag_rows = np.zeros(0, dtype=np.int64)
         self.np_float = _np_float()
 
@@ -279,7 +277,12 @@ class GuideSimulation:
             fixed[rows] = 1
             body[rows] = pinned_positions.astype(np.float64)
         self.drag_rows = np.zeros(0, dtype=np.int64) if drag_vertices is None else self.row_of[drag_vertices]
-        self.body = body
+        # The springs' weights and the targets' clearance, per drag vertex: fixed until the next call (after every
+        # Model build or update, and at every drag and release), so a frame reads nothing back.
+        con, rows = self.solver.contacts, self.drag_rows
+        self._drag_weight = (DRAG_WEIGHT * con.vertex_weight_base.to_numpy()[rows].astype(np.float64)
+                             / con.vertex_dt_bend.to_numpy()[rows] ** 2)
+        self._drag_clearance = con.vertex_radius.to_numpy()[rows].astype(np.float64)
         self.model.vertex_is_fixed.from_numpy(fixed.astype(np.int32))
         self.model.vertex_body_position.from_numpy(body.astype(self.np_float))
         self.drag_springs(drag_position)
@@ -294,17 +297,15 @@ class GuideSimulation:
         edge): in free space the vertex trails its target by its strand's pull over k (1.96 mm for the tests' 10 cm
         strands pulled 3 cm); where a contact stops it, the correction keeps it outside.  A target inside a body is
         replaced by the point where the straight way to it from the vertex meets the body (:func:`reachable_targets`)."""
-        con = self.solver.contacts
         rows = self.drag_rows
         if drag_position is None or rows.size == 0:
             self.solver.set_attachments(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
             return
-        k = DRAG_WEIGHT * con.vertex_weight_base.to_numpy()[rows].astype(np.float64) / con.vertex_dt_bend.to_numpy()[rows] ** 2
         target = np.asarray(drag_position, np.float64)
         if self.scene_colliders:
             target = reachable_targets(self.scene_colliders, self.state.vertex_position.to_numpy()[rows], target,
-                                       con.vertex_radius.to_numpy()[rows].astype(np.float64))
-        self.solver.set_attachments(rows, target, k)
+                                       self._drag_clearance)
+        self.solver.set_attachments(rows, target, self._drag_weight)
 
     def step(self, drag_position=None) -> None:
         """One quasistatic step (``config.iterations`` ADMM iterations); ``drag_position`` [m], if
