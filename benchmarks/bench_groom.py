@@ -26,7 +26,7 @@ grooming app's (``--numpy-huge-pages app``, default: NumPy's huge-page advice of
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
         [--contacts on|off] [--size 960 720] [--edit spread|region] [--rest-pose authored|sag-free]
-        [--rest-max-change X]
+        [--rest-max-change X] [--unheld-shape-weight W]
         [--numpy-huge-pages app|numpy] [--drawing auto|lines|raster] [--out FILE]
 
 JSON goes to ``benchmarks/results/groom/groom_<strands>_<arch>_contacts_<on|off>.json`` by default; a run
@@ -61,6 +61,9 @@ def main(argv=None):
     p.add_argument("--rest-max-change", type=float, default=None,
                    help="GroomingConfig.rest_max_change: the largest rest strain change of a held guide (sag-free; "
                         "default GroomingConfig's)")
+    p.add_argument("--unheld-shape-weight", type=float, default=None,
+                   help="GroomingConfig.unheld_shape_weight: springs that hold the guides the sag-free rest pose does "
+                        "not hold to their authored shape (0: they sag; default GroomingConfig's)")
     p.add_argument("--edit", choices=["spread", "region"], default="spread",
                    help="which 10 %% of the strands the edit takes: every 10th, or those rooted nearest one root")
     p.add_argument("--numpy-huge-pages", choices=("app", "numpy"), default="app",
@@ -97,7 +100,8 @@ def main(argv=None):
     cfg = GroomingConfig(iterations=args.iterations, guide_ratio=args.guide_ratio,
                          contacts=args.contacts == "on", autosave_every=0, schedule=args.schedule,
                          rest_pose=args.rest_pose,
-                         **({} if args.rest_max_change is None else {"rest_max_change": args.rest_max_change}))
+                         **({} if args.rest_max_change is None else {"rest_max_change": args.rest_max_change}),
+                         **({} if args.unheld_shape_weight is None else {"unheld_shape_weight": args.unheld_shape_weight}))
     session = GroomingSession(groom, cfg)
     with stopwatch(ti.sync) as sw:
         session._ensure_built()
@@ -108,6 +112,7 @@ def main(argv=None):
     res["render_vertices"] = int(groom.vertex_count)
     if args.rest_pose == "sag-free":
         res["rest_max_change"] = cfg.rest_max_change
+        res["unheld_shape_weight"] = cfg.unheld_shape_weight
         res["guides_held"] = int(session.rest_pose_report()["strands_held"])
     print(f"{arch}: {args.strands} strands x {args.vertices} vertices, {res['guides']} guides "
           f"({res['simulated_vertices']} simulated vertices); generated in {res['generate_s']:.1f} s, "

@@ -601,6 +601,42 @@ def test_drag_targets_inside_a_body_move_to_where_the_way_to_them_meets_it():
     assert np.array_equal(out[1], target[1]) and np.array_equal(out[2], x[2])
 
 
+def test_guides_the_rest_pose_cannot_hold_are_held_by_springs_to_their_authored_shape():
+    """Sag-free, with ``rest_max_change`` 0.05 the rest pose holds none of the 12 horizontal helices, so each free
+    vertex gets a zero-length spring k_i to its authored position (``GuideSimulation.shape_springs``).  The authored
+    shape is their elastic rest shape, so the elastic Hessian K_e there is positive semi-definite, and the static
+    displacement u = (K_s + K_e)^-1 M g satisfies sum_i k_i |u_i|^2 <= u^T (K_s + K_e) u = f^T u
+    <= f^T K_s^-1 f = sum_i (m_i g)^2 / k_i (linearised statics; tolerance: the bound itself, measured 0.95 of it
+    after 10 frames, max |u| 13 um).  Without the springs (the weight set to 0, a live parameter) the same guides sag
+    tens of millimetres (measured 65 mm).  A dragged vertex follows the drag's spring, not its shape spring."""
+    s = session(rest_pose="sag-free", rest_max_change=0.05, autosave_every=0)
+    s.advance(10)
+    sim = s._sim
+    assert len(s.rest_pose_report()["not_held"]) == NS
+    rows, target, k = sim.shape_springs()
+    assert rows.size == NS * (NV - 2) and np.all(k > 0)  # every vertex but the two of the clamped root edge
+    m = sim.model.host["vertex_mass"][rows]
+    u = sim.state.vertex_position.to_numpy().astype(np.float64)[rows] - target
+    lhs, bound = np.sum(k * np.sum(u * u, axis=1)), np.sum((m * 9.81) ** 2 / k)
+    assert lhs <= bound, (lhs, bound)
+    assert np.linalg.norm(u, axis=1).max() < 1e-4
+    s.set_parameter("unheld_shape_weight", 0.0)
+    s.advance(10)
+    assert sim.shape_springs()[0].size == 0
+    x = sim.state.vertex_position.to_numpy().astype(np.float64)
+    assert np.linalg.norm(x[rows] - target, axis=1).max() > 0.02
+    s.undo()  # the springs again
+    s.advance(10)
+    tip = s.groom.strand_offsets[1] - 1
+    start = s.groom.points[tip].astype(np.float64)
+    s.select(start, 1e-4)
+    s.drag([0.0, 0.02, 0.0], stiffness=1.0)
+    s.advance(5)
+    # The grabbed tip rises toward its target, 2 cm up, within the drag spring's lag (measured 18.0 mm); held by its
+    # shape spring (10 times the drag's weight) as well, it would rise ~1/11 of the way.
+    assert s.groom.points[tip, 1] - start[1] > 0.015
+
+
 # =========================================================================== the comb
 def hanging(ns=6, nv=11):
     """Straight strands hanging 10 cm down from roots 1 cm apart along x (no gravity in the comb tests,

@@ -288,8 +288,9 @@ def run_offscreen(args) -> int:
     if session.config.rest_pose == "sag-free":  # the equilibrium residual, guides held, drift (issue 14 item 2)
         rep = session.rest_pose_report()
         summary["rest_pose"] = rep
-        held = (f"; sag-free: {rep['strands_held']}/{rep['guides']} guides held, drift p90 "
-                f"{1e3 * rep['drift_p90_m']:.3f} mm")
+        held = (f"; sag-free: {rep['strands_held']}/{rep['guides']} guides held"
+                + (f" ({rep['held_by_springs']} more by shape springs)" if rep["held_by_springs"] else "")
+                + f", drift p90 {1e3 * rep['drift_p90_m']:.3f} mm")
     q = summary["quality"] = session.quality()  # the guides at the end, and their worst step (hair pairs)
     with open(os.path.join(args.out, "summary.json"), "w", encoding="utf-8") as fh:
         json.dump(summary, fh, indent=1, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v))

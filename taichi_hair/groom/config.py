@@ -71,6 +71,15 @@ class GroomingConfig:
             flagged (the same 9 %); the guides not held sag onto their neighbours, and the quasistatic steps
             and the correction then fight over their near-root vertices every frame: 1,458 against 978 ms per
             frame (BENCHMARKS.md, "Why the groom never comes to rest").
+        unheld_shape_weight: with ``rest_pose = "sag-free"``, the guides the rest pose does not hold (``rest_max_change``)
+            are held to their authored shape by zero-length springs on their free vertices, Han & Harada 2012's global
+            shape constraint (the TressFX solver's, :mod:`taichi_hair.solvers.shape`), each of this many times the weight
+            of a contact on the vertex (k = w m / dt~^2, as the drag's springs); 0 lets them sag [-].  A dragged vertex
+            follows the drag's spring instead.  Measured on the grooming benchmark's groom (8,600 wavy guides, 364 not
+            held at ``rest_max_change`` 1.9; BENCHMARKS.md, "Guides the rest pose cannot hold"): at 0 those guides sag
+            ~5 mm (p90) onto their neighbours and the quasistatic steps and the end-of-step correction fight over them
+            every frame, the correction at its 80-sweep cap (~990 ms per frame); at 10 they stay within 0.12 mm (p90)
+            of their authored shape, the groom comes to rest and the correction stops after 15 sweeps (~500 ms).
         schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (strand on CPU, stage on GPU),
             ``"stage"`` or ``"strand"`` (SolverADMMConfig.schedule: same results, other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
@@ -91,6 +100,7 @@ class GroomingConfig:
     w0: float = 1.0
     rest_pose: str = "authored"
     rest_max_change: float = 1.9
+    unheld_shape_weight: float = 10.0
     schedule: str = "auto"
     autosave_every: int = 1
     undo_limit: int = 100
@@ -101,7 +111,7 @@ class GroomingConfig:
             if not (_finite(v) and v > 0):
                 raise ValueError(f"GroomingConfig.{name} must be a finite positive number, got {v!r}")
             setattr(self, name, float(v))
-        for name in ("friction", "contact_margin"):
+        for name in ("friction", "contact_margin", "unheld_shape_weight"):
             v = getattr(self, name)
             if not (_finite(v) and v >= 0):
                 raise ValueError(f"GroomingConfig.{name} must be a finite number >= 0, got {v!r}")

@@ -42,6 +42,8 @@ PAIR_SKIN_MARGINS = 5.0
 #: and 3 and pops off it at 10 and 100 (the iterate goes k / (k + W_z) of the way to a target inside the body); a
 #: grabbed tip trails its target by 1.96 / 0.75 / 0.25 / 0.027 mm in free space.
 DRAG_WEIGHT = 1.0
+#: No springs: ``(rows, targets, weights)`` of :meth:`GuideSimulation.shape_springs`.
+_NO_SPRINGS = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
 #: ``GuideSimulation.quality_worst`` before any step.
 WORST_RESET = {"steps": 0, "crossed_pairs_worst": 0, "hair_penetration_max_m_worst": 0.0}
 
@@ -192,6 +194,8 @@ class GuideSimulation:
         self.base_body = model.host["vertex_body_position"].copy()
         self.drag_rows = np.zeros(0, dtype=np.int64)
         self.np_float = _np_float()
+        self.shape_weight = cfg.unheld_shape_weight
+        self._shape_key, self._shape, self._drag_position = None, _NO_SPRINGS, None
 
     def update(self, groom, config, guides: np.ndarray) -> None:
         """New rest shapes and materials, same layout: :meth:`Model.update`, ``refresh_model`` and a
@@ -207,6 +211,7 @@ class GuideSimulation:
         self.apply_live_parameters(cfg)  # (the gravity the rest pose was solved for)
         self.solver.config.w0 = cfg.w0
         self.solver.refresh_model()
+        self._shape_key = None  # (new rest pose, new contact weights: set_kinematics computes the springs again)
         if self.skin is not None:
             rest = g.rest_points.astype(np.float64)
             rest.flags.writeable = False  # (ours alone: the binding takes it without another copy)
@@ -251,11 +256,14 @@ class GuideSimulation:
             apply_rest_pose(self.model, result)
 
     def apply_live_parameters(self, config) -> None:
-        """Gravity, iterations and friction of ``config`` into the running solver."""
+        """Gravity, iterations, friction and the unheld guides' shape springs of ``config`` into the running solver."""
         self.control.gravity = tuple(config.gravity)
         self.solver.config.iterations = config.iterations
         if self.solver.contacts is not None:
             self.solver.contacts.config.friction = config.friction
+        if config.unheld_shape_weight != self.shape_weight:
+            self.shape_weight = config.unheld_shape_weight
+            self.drag_springs(self._drag_position)
 
     def load_positions(self, points: np.ndarray) -> None:
         """State from the groom's current pose ``points`` (vertex_count, 3) [m]: rest frames and
@@ -287,6 +295,32 @@ class GuideSimulation:
         self.model.vertex_body_position.from_numpy(body.astype(self.np_float))
         self.drag_springs(drag_position)
 
+    def shape_springs(self) -> tuple:
+        """``(rows, targets [m], weights [N/m])`` of the springs that hold the guides the sag-free rest pose does not
+        hold (``rest_pose_result.unheld``) to their authored shape: every free vertex of such a guide, toward its rest
+        position, with ``GroomingConfig.unheld_shape_weight`` times the weight of a contact on it (Han & Harada 2012's
+        global shape constraint; the drag's spring form, :meth:`drag_springs`); none with an authored rest pose or a
+        zero weight.  Computed again only after a new rest pose or weight."""
+        r, weight = self.rest_pose_result, self.shape_weight
+        if self._shape_key is not None and self._shape_key[0] is r and self._shape_key[1] == weight:
+            return self._shape
+        self._shape_key, self._shape = (r, weight), _NO_SPRINGS
+        if r is not None and r.unheld and weight > 0:
+            host = self.model.host
+            unheld = np.array(sorted(s for s, _ in r.unheld), dtype=np.int64)
+            start, count = host["strand_vertex_start"][unheld], host["strand_vertex_count"][unheld]
+            rows = np.repeat(start - np.concatenate([[0], np.cumsum(count)[:-1]]), count) + np.arange(count.sum())
+            rows = rows[self.base_fixed[rows] == 0]
+            con = self.solver.contacts
+            k = weight * con.vertex_weight_base.to_numpy()[rows].astype(np.float64) / con.vertex_dt_bend.to_numpy()[rows] ** 2
+            target = host["vertex_rest_position"][rows].astype(np.float64)
+            if self.scene_colliders:  # (an authored vertex inside the head: its spring stops at the surface)
+                clearance = con.vertex_radius.to_numpy()[rows].astype(np.float64)
+                target = reachable_targets(self.scene_colliders, self.state.vertex_position.to_numpy()[rows], target,
+                                           clearance)
+            self._shape = (rows, target, k)
+        return self._shape
+
     def drag_springs(self, drag_position=None) -> None:
         """Hold the drag's vertices (``drag_rows``) at ``drag_position`` [m] by zero-length springs
         (``SolverADMM.set_attachments``), the "spring-like forces" of the paper's direct manipulation (Sec. 5.3): the
@@ -297,15 +331,20 @@ class GuideSimulation:
         edge): in free space the vertex trails its target by its strand's pull over k (1.96 mm for the tests' 10 cm
         strands pulled 3 cm); where a contact stops it, the correction keeps it outside.  A target inside a body is
         replaced by the point where the straight way to it from the vertex meets the body (:func:`reachable_targets`)."""
+        self._drag_position = drag_position
         rows = self.drag_rows
+        shape_rows, shape_target, shape_weight = self.shape_springs()
         if drag_position is None or rows.size == 0:
-            self.solver.set_attachments(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
+            self.solver.set_attachments(shape_rows, shape_target, shape_weight)
             return
         target = np.asarray(drag_position, np.float64)
         if self.scene_colliders:
             target = reachable_targets(self.scene_colliders, self.state.vertex_position.to_numpy()[rows], target,
                                        self._drag_clearance)
-        self.solver.set_attachments(rows, target, self._drag_weight)
+        keep = ~np.isin(shape_rows, rows)  # (a dragged vertex of an unheld guide follows the drag)
+        self.solver.set_attachments(np.concatenate([shape_rows[keep], rows]),
+                                    np.concatenate([shape_target[keep], target]),
+                                    np.concatenate([shape_weight[keep], self._drag_weight]))
 
     def step(self, drag_position=None) -> None:
         """One quasistatic step (``config.iterations`` ADMM iterations); ``drag_position`` [m], if
@@ -374,7 +413,8 @@ class GuideSimulation:
     def rest_pose_report(self, groom, config) -> dict:
         """The equilibrium residual of the guides' Model under ``config.gravity`` (largest unbalanced vertex
         force over the strand's weight: round-off when sag-free, ~1 when authored), the strands the sag-free
-        solve holds (groom indices of those it does not), and the drift of ``groom.points`` from
+        solve holds (groom indices of those it does not; ``held_by_springs``: how many of them the shape springs hold,
+        :meth:`shape_springs`), and the drift of ``groom.points`` from
         ``groom.rest_points`` over the free guide vertices (p90 and max) [m]."""
         from ..solvers.rest_pose import equilibrium_residual
 
@@ -386,6 +426,7 @@ class GuideSimulation:
                     residual_max=float(np.nanmax(res)), residual_p50=float(np.nanmedian(res)),
                     strands_held=None if r is None else r.held_count,
                     not_held=[] if r is None else [int(self.guides[s]) for s, _ in r.unheld],
+                    held_by_springs=0 if r is None or self.shape_weight <= 0 else len(r.unheld),
                     may_buckle=[] if r is None else [int(self.guides[s]) for s, _ in r.unstable],
                     drift_p90_m=float(np.percentile(d, 90)) if d.size else 0.0,
                     drift_max_m=float(d.max()) if d.size else 0.0)
