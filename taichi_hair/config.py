@@ -206,6 +206,9 @@ class ContactConfig:
             (6 in the paper) [-].
         projection_iterations: Gauss-Seidel sweeps over the 8 batches per
             ADMM iteration (2 in the paper's hairball) [-].
+        projection_contact_order: the z-step's sweeps, as ``correction_contact_order`` ("auto": one by one on a CPU, the
+            paper's 8 Jacobi batches on a GPU); on the 2-core CPU (2026-12-06, BENCHMARKS.md) 70 -> 28 ms per step on the
+            1,000-strand hairball, 258 -> 111 on the grooming benchmark, the same strain and penetration figures [-].
         correction_iterations: sweeps of the final geometric correction on x
             (10 in the paper's hairball; 0 disables it) [-].
         capacity_per_vertex: initial contact buffer size per vertex; grown
@@ -384,6 +387,7 @@ class ContactConfig:
     correction_lengths: CorrectionLengths = CorrectionLengths.REST
     correction_edge_order: CorrectionEdgeOrder = CorrectionEdgeOrder.AUTO
     correction_contact_order: CorrectionContactOrder = CorrectionContactOrder.AUTO
+    projection_contact_order: CorrectionContactOrder = CorrectionContactOrder.AUTO
     correction_max_iterations: int = 80
     correction_tolerance: float = 0.0
     correction_relinearize_every: int = 10
@@ -415,15 +419,11 @@ class ContactConfig:
         if not (isinstance(self.correction_max_iterations, int) and self.correction_max_iterations >= 0):
             raise ValueError("ContactConfig.correction_max_iterations must be an integer >= 0, got "
                              f"{self.correction_max_iterations!r}")
-        self.correction_lengths = as_choice(CorrectionLengths, "ContactConfig", "correction_lengths",
-                                            self.correction_lengths)
-        self.correction_edge_order = as_choice(CorrectionEdgeOrder, "ContactConfig", "correction_edge_order",
-                                               self.correction_edge_order)
-        self.correction_contact_order = as_choice(CorrectionContactOrder, "ContactConfig", "correction_contact_order",
-                                                  self.correction_contact_order)
-        self.correction_mass_splitting = as_choice(MassSplitting, "ContactConfig", "correction_mass_splitting",
-                                                   self.correction_mass_splitting)
-        self.weight_time = as_choice(WeightTime, "ContactConfig", "weight_time", self.weight_time)
+        for name, kind in (("correction_lengths", CorrectionLengths), ("correction_edge_order", CorrectionEdgeOrder),
+                           ("correction_contact_order", CorrectionContactOrder), ("weight_time", WeightTime),
+                           ("projection_contact_order", CorrectionContactOrder),
+                           ("correction_mass_splitting", MassSplitting)):
+            setattr(self, name, as_choice(kind, "ContactConfig", name, getattr(self, name)))
         if not isinstance(self.correction_hair_friction, bool):
             raise ValueError("ContactConfig.correction_hair_friction must be a bool, got "
                              f"{self.correction_hair_friction!r}")

@@ -8,7 +8,7 @@ and grown when the contact count overflows.
 import numpy as np
 import taichi as ti
 
-from ..config import MassSplitting, WeightTime
+from ..config import CorrectionContactOrder, MassSplitting, WeightTime
 from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, build_adjacency, count_contacts, write_contacts)
@@ -384,10 +384,13 @@ class ContactPipeline:
 
     def project(self, x, buf, sweeps: int) -> None:
         """The z-step and lambda_z update of one ADMM iteration (Sec. 4.5), then W_z for the global step."""
-        from .projection import projection_begin, projection_end, projection_sweep
+        from .projection import SEQUENTIAL, projection_begin, projection_end, projection_sweep
 
         projection_begin(x, self.con, False)
         serial = self._serial_contacts
+        order = self.config.projection_contact_order
+        if order == CorrectionContactOrder.SEQUENTIAL or (order == CorrectionContactOrder.AUTO and not on_gpu()):
+            serial = SEQUENTIAL  # (each contact's push applied before the next is solved, on one thread)
         for _ in range(sweeps):
             projection_sweep(self.con, serial)
         projection_end(x, self.con, buf)
