@@ -206,9 +206,9 @@ class ContactConfig:
             (6 in the paper) [-].
         projection_iterations: Gauss-Seidel sweeps over the 8 batches per
             ADMM iteration (2 in the paper's hairball) [-].
-        projection_contact_order: the z-step's sweeps, as ``correction_contact_order`` ("auto": one by one on a CPU, the
-            paper's 8 Jacobi batches on a GPU); on the 2-core CPU (2026-12-06, BENCHMARKS.md) 70 -> 28 ms per step on the
-            1,000-strand hairball, 258 -> 111 on the grooming benchmark, the same strain and penetration figures [-].
+        projection_contact_order: the z-step's sweeps, as ``correction_contact_order`` ("auto": one by one in the
+            quasistatic mode on a CPU, the paper's 8 Jacobi batches otherwise); 2-core CPU, 2026-12-06: grooming 258 -> 111
+            ms per step, the same figures; dynamic runs keep the batches (BENCHMARKS.md, "The z-step one by one") [-].
         correction_iterations: sweeps of the final geometric correction on x
             (10 in the paper's hairball; 0 disables it) [-].
         capacity_per_vertex: initial contact buffer size per vertex; grown

@@ -92,6 +92,7 @@ class ContactPipeline:
         #: pool), and the correction's edge passes and acceleration too (CPU, fewer than ``_SERIAL_VERTICES``).
         self._serial_contacts = False
         self._serial_strands = (not on_gpu()) and n < _SERIAL_VERTICES
+        self._dynamic = True  # (the last detection's mode; ``detect`` sets it with its dt)
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
         #: allocates nothing; a direct call of ``detect_continuous`` without them allocates them then).
         self.ccd = CCDFields(n) if config.continuous_detections > 0 else None
@@ -389,7 +390,8 @@ class ContactPipeline:
         projection_begin(x, self.con, False)
         serial = self._serial_contacts
         order = self.config.projection_contact_order
-        if order == CorrectionContactOrder.SEQUENTIAL or (order == CorrectionContactOrder.AUTO and not on_gpu()):
+        if order == CorrectionContactOrder.SEQUENTIAL or (order == CorrectionContactOrder.AUTO and not on_gpu()
+                                                          and not self._dynamic):
             serial = SEQUENTIAL  # (each contact's push applied before the next is solved, on one thread)
         for _ in range(sweeps):
             projection_sweep(self.con, serial)
