@@ -291,6 +291,10 @@ def test_bad_session_files_and_bad_grooms_are_one_line_errors(tmp_path, capsys):
                "--rest-pose", "sag-free", "--rest-max-change", "0"] + COMMON)
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "\n" not in err and "rest_max_change" in err, err
+    rc = main(["groom", str(groom_path), "--offscreen", "--script", str(good), "--out", str(tmp_path / "o"),
+               "--rest-pose", "sag-free", "--unheld-shape-weight", "-1"] + COMMON)
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and "unheld_shape_weight" in err, err
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):  # the window needs a display
         rc = main(["groom", str(groom_path)] + COMMON)
         err = capsys.readouterr().err.strip()

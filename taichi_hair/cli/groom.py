@@ -195,6 +195,8 @@ def session_config(groom, args):
             over["rest_pose"] = args.rest_pose
         if getattr(args, "rest_max_change", None) is not None:
             over["rest_max_change"] = args.rest_max_change
+        if getattr(args, "unheld_shape_weight", None) is not None:
+            over["unheld_shape_weight"] = args.unheld_shape_weight
         return replace(cfg, **over)
     except (TypeError, ValueError) as exc:
         raise CLIError(str(exc)) from None
@@ -347,7 +349,10 @@ def _add_session_options(p) -> None:
     p.add_argument("--rest-max-change", type=float, default=None,
                    help="with --rest-pose sag-free: the largest change of a rest strain from the authored one for a "
                         "guide to be held (default 1.9 in grooming; 1.0 is ~60 degrees per vertex); the guides not "
-                        "held keep their authored rest pose and sag")
+                        "held keep their authored rest pose, held to their shape by springs (--unheld-shape-weight)")
+    p.add_argument("--unheld-shape-weight", type=float, default=None,
+                   help="with --rest-pose sag-free: the springs that hold the guides the rest pose does not hold to "
+                        "their authored shape, in contact weights (default 10; 0 lets them sag)")
     p.add_argument("--arch", default="cpu", help="Taichi arch: cpu (default), cuda, gpu, vulkan")
 
 

@@ -78,8 +78,9 @@ class GroomingConfig:
             follows the drag's spring instead.  Measured on the grooming benchmark's groom (8,600 wavy guides, 364 not
             held at ``rest_max_change`` 1.9; BENCHMARKS.md, "Guides the rest pose cannot hold"): at 0 those guides sag
             ~5 mm (p90) onto their neighbours and the quasistatic steps and the end-of-step correction fight over them
-            every frame, the correction at its 80-sweep cap (~990 ms per frame); at 10 they stay within 0.12 mm (p90)
-            of their authored shape, the groom comes to rest and the correction stops after 15 sweeps (~500 ms).
+            every frame, the correction at its 80-sweep cap; at 10 they stay within 0.12 mm (p90) of their authored
+            shape, the groom comes to rest and the correction stops after 15 sweeps: 1,003 against 496 ms of simulation
+            per frame (``bench_groom.py --rest-pose sag-free --unheld-shape-weight 0|10``, commit 1de4086).
         schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (strand on CPU, stage on GPU),
             ``"stage"`` or ``"strand"`` (SolverADMMConfig.schedule: same results, other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
