@@ -842,9 +842,10 @@ def test_z_step_contacts_one_by_one_and_in_the_papers_batches_reach_the_same_pro
     """The z-step (Sec. 4.5, problem 5) without friction is a strictly convex QP, min 1/2 |z - (x - lambda_z)|^2_{W_z}
     subject to every linearised contact gap >= 0, so its solution is unique: the sweeps in the paper's 8 Jacobi
     batches (``projection_contact_order="batches"``: the GPU's, and the CPU's in the dynamic mode) and one contact
-    after the other (the CPU's in the quasistatic mode, pure Gauss-Seidel) converge to the same z.  Twelve rods across one edge of a thirteenth, their middles pushed
-    0.3 mm through it (135 contact vertices, the z-step moves them up to 0.25 mm): after one sweep the two orders
-    differ (measured 99 um: the option changes the sweep), after 400 they agree to 1e-7 m (f32; measured 1.2e-10)."""
+    after the other (the CPU's in the quasistatic mode, pure Gauss-Seidel) converge to the same z.  Twelve rods across
+    one edge of a thirteenth, their middles pushed 0.3 mm through it (135 contact vertices, the z-step moves them up to
+    0.25 mm): after one sweep the two orders differ (measured 99 um: the option changes the sweep), after 400 they agree
+    to 1e-7 m (f32; measured 1.2e-10)."""
     mat = RodMaterial(radius=5e-5)
     b = GroomBuilder()
     b.add_strand(line((-0.01, 0, 0.0), (0.01, 0, 0.0), 11), mat, root="free")
