@@ -97,6 +97,8 @@ def sweep(sim, positions: np.ndarray, radius: float, axis: np.ndarray, length: f
             if nc:
                 mine = con.con.contact_collider.to_numpy()[:nc] == k
                 touched[vertex_strand[con.con.contact_vertex.to_numpy()[:nc, 0][mine]]] = True
+            if touched.any():  # (guides held by shape springs: held where the comb left them, not pulled back)
+                sim.shape_springs_follow(touched)
             ti.sync()
             frame_seconds.append(time.perf_counter() - t0)
     finally:

@@ -321,6 +321,17 @@ class GuideSimulation:
             self._shape = (rows, target, k)
         return self._shape
 
+    def shape_springs_follow(self, strands: np.ndarray) -> None:
+        """During a comb stroke: the shape springs of the guides ``strands`` (bool, guide count) hold them where they
+        are now, not at their authored shape, so the comb moves them and they stay where it leaves them (the stroke
+        then makes that their rest shape); the other guides keep theirs.  Called after each of the stroke's steps."""
+        rows, target, k = self.shape_springs()
+        moved = strands[self.model.host["vertex_strand"][rows]]
+        if moved.any():
+            target = target.copy()
+            target[moved] = self.state.vertex_position.to_numpy()[rows[moved]]
+            self.solver.set_attachments(rows, target, k)
+
     def drag_springs(self, drag_position=None) -> None:
         """Hold the drag's vertices (``drag_rows``) at ``drag_position`` [m] by zero-length springs
         (``SolverADMM.set_attachments``), the "spring-like forces" of the paper's direct manipulation (Sec. 5.3): the
