@@ -506,7 +506,7 @@ class SolverADMM(SolverBase):
 
     def set_attachments(self, vertices, targets, weights) -> None:
         """Zero-length springs k_i (target_i - x_i) on ``vertices`` only, from the next step on (targets [m], (k, 3);
-        k_i [N/m], (k,) or one), in the position system (``admm.assemble_position_at``; the grooming drag)."""
+        k_i [N/m], (k,) or one), in the position system (``admm.assemble_position_at``; the grooming drag and shape springs)."""
         v, t, k = np.asarray(vertices, np.int64), np.asarray(targets, np.float64), np.asarray(weights, np.float64)
         n = self.model.vertex_count
         if (v.ndim != 1 or np.any((v < 0) | (v >= n)) or t.shape != (v.size, 3) or k.shape not in ((), v.shape)

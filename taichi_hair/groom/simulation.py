@@ -208,10 +208,10 @@ class GuideSimulation:
         before = (self._authored_host, self.rest_pose_result, self._rest_pose_gravity, self._rest_max_change)
         self.model.update(host, materials)
         self._solve_rest_pose(cfg, before)
-        self.apply_live_parameters(cfg)  # (the gravity the rest pose was solved for)
         self.solver.config.w0 = cfg.w0
         self.solver.refresh_model()
-        self._shape_key = None  # (new rest pose, new contact weights: set_kinematics computes the springs again)
+        self._shape_key = None  # (new rest pose, new contact weights: the shape springs are computed again)
+        self.apply_live_parameters(cfg)  # (the gravity the rest pose was solved for; after the new contact weights)
         if self.skin is not None:
             rest = g.rest_points.astype(np.float64)
             rest.flags.writeable = False  # (ours alone: the binding takes it without another copy)
