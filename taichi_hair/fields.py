@@ -237,6 +237,9 @@ class SolverBuffers:
 #: Contact batches of the hybrid Gauss-Seidel/Jacobi projection: contact c is in batch c % CONTACT_BATCHES
 #: (Daviet 2023 Sec. 4.5: 8; :mod:`taichi_hair.contact.projection`).
 CONTACT_BATCHES = 8
+#: Slabs of strands of the slab-parallel Gauss-Seidel sweep (``contact.slabs``): the contact groups are the slabs'
+#: own contacts, those between neighbouring slabs, and the rest, 2 * CONTACT_SLABS groups [-].
+CONTACT_SLABS = 8
 ivec4 = ti.types.vector(4, ti.i32)
 vec4 = ti.types.vector(4, float)
 vec9 = ti.types.vector(9, float)
@@ -298,6 +301,15 @@ class ContactFields:
         #: Where batch b begins in vertex i's CSR list (it ends where batch b + 1 begins, the last batch at
         #: ``vertex_contact_start[i + 1]``) [-], shape (vertex_count, BATCHES).
         self.vertex_batch_start = ti.field(ti.i32, (n, CONTACT_BATCHES))
+        #: Where each slab group of the contacts begins (``contact.slabs.group_contacts`` sorts the detection's
+        #: contacts by group; contacts appended later in the step join the last group) [-], shape
+        #: (2 * CONTACT_SLABS + 1,); a contact's group, then the index it came from [-], shape (capacity,); scratch
+        #: copies of ``contact_vertex`` and ``contact_weight`` for the sort, shape (capacity,).
+        self.contact_group_start = ti.field(ti.i32, 2 * CONTACT_SLABS + 1)
+        self.contact_group = ti.field(ti.i32, c)
+        self.contact_order = ti.field(ti.i32, c)
+        self.contact_vertex_scratch = ti.field(ivec4, c)
+        self.contact_weight_scratch = ti.field(vec4, c)
         #: Compact list of the vertices with at least one contact [-], shape (vertex_count,), and its length, shape ().
         self.active_vertex = ti.field(ti.i32, n)
         self.active_vertex_count = ti.field(ti.i32, ())

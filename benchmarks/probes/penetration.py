@@ -223,7 +223,7 @@ def main(argv=None) -> int:
         def project(x, buf, sweeps):
             if calls[0] > 0 and calls[0] % every_it == 0:
                 C.relinearize_contacts(x, solver.buf.vertex_position_begin, pipe.vertex_radius, pipe.colliders, pipe.con,
-                                       pipe.config.mass_splitting == "batch", False)
+                                       pipe.config.mass_splitting == "batch", False, pipe.uses_batches(pipe._dynamic))
             calls[0] += 1
             orig_project(x, buf, sweeps)
         pipe.project, pipe.detect = project, detect

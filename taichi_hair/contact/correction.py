@@ -6,11 +6,11 @@ deeper than the tolerance or a cap of sweeps is reached.
 
 import taichi as ti
 
-from ..config import CorrectionContactOrder, CorrectionEdgeOrder, CorrectionLengths, MassSplitting
+from ..config import CorrectionEdgeOrder, CorrectionLengths, MassSplitting
 from ..solver_base import on_gpu
 
 from .narrow import SPLIT_NONE, relinearize_contacts
-from .projection import (SEQUENTIAL, chebyshev_step, contact_statistics, correction_end, correction_sweep,
+from .projection import (chebyshev_step, contact_statistics, correction_end, correction_sweep,
                          hold_lengths_sweep, projection_begin, projection_sweep, store_edge_lengths)
 
 #: Edge-length passes that end the length-holding correction (:func:`correct`), before each
@@ -63,14 +63,12 @@ def correct(pl, x, x0, sweeps: int) -> None:
     every = cfg.correction_relinearize_every if cfg.relinearize_correction else 0
     if cfg.relinearize_correction:
         # (Without it the correction keeps the detection's D_hat and friction coefficients.)
-        relinearize_contacts(x, x0, pl.vertex_radius, pl.colliders, pl.con, split, frictionless)
+        relinearize_contacts(x, x0, pl.vertex_radius, pl.colliders, pl.con, split, frictionless,
+                             pl.uses_batches(pl._dynamic))
     if hold:
         store_edge_lengths(m.edge, x, pl.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
     projection_begin(x, pl.con, True)
-    serial, small = pl._serial_contacts, pl._serial_strands
-    if (cfg.correction_contact_order == CorrectionContactOrder.SEQUENTIAL
-            or (cfg.correction_contact_order == CorrectionContactOrder.AUTO and not on_gpu())):
-        serial = SEQUENTIAL
+    serial, small = pl.sweep_order(cfg.correction_contact_order, not on_gpu()), pl._serial_strands
     tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else 0.25 * pl.max_radius
     cap = max(sweeps, cfg.correction_max_iterations)
     rho = cfg.correction_chebyshev_rho
@@ -140,5 +138,6 @@ def correct(pl, x, x0, sweeps: int) -> None:
 
 def _restart(pl, x, x0, split, frictionless) -> None:
     """Re-linearise every contact at x and restart the correction from it (z = x, r~ = 0)."""
-    relinearize_contacts(x, x0, pl.vertex_radius, pl.colliders, pl.con, split, frictionless)
+    relinearize_contacts(x, x0, pl.vertex_radius, pl.colliders, pl.con, split, frictionless,
+                         pl.uses_batches(pl._dynamic))
     projection_begin(x, pl.con, True)

@@ -297,10 +297,12 @@ def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> f
                 if ti.static(split_by_batch == SPLIT_NONE):
                     copies = 1
                 elif ti.static(split_by_batch):
-                    copies = 0
-                    for e in range(con.vertex_contact_start[v], con.vertex_contact_start[v + 1]):
-                        if con.vertex_contact_list[e] % BATCHES == c % BATCHES:
-                            copies += 1
+                    # (v's list is sorted by batch, ``build_adjacency``: the batch's entries are one run.)
+                    b = c % BATCHES
+                    stop = con.vertex_contact_start[v + 1]
+                    if b + 1 < BATCHES:
+                        stop = con.vertex_batch_start[v, b + 1]
+                    copies = stop - con.vertex_batch_start[v, b]
                 dh += copies * h * h * iw
                 lever = ti.max(lever, ti.abs(h) * iw)
             else:
@@ -312,7 +314,8 @@ def _delassus(con: ti.template(), c: ti.i32, split_by_batch: ti.template()) -> f
 
 @ti.kernel
 def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.template(), cs: ti.template(),
-                         con: ti.template(), split_by_batch: ti.template(), frictionless_hair: ti.template()):
+                         con: ti.template(), split_by_batch: ti.template(), frictionless_hair: ti.template(),
+                         coefficients: ti.template()):
     """Re-linearise every contact at the current x, before the geometric correction.
 
     Contacts are linearised at the beginning of the step (closest points, normal, body tangent plane).
@@ -325,6 +328,8 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
     beginning of the step (x^t for hair pairs, the begin-of-step body point carried by the body).
     ``split_by_batch``: the mass splitting of D_hat (``_delassus``); ``frictionless_hair``: zero the hair-hair
     friction coefficients (``ContactConfig.correction_hair_friction`` off; the next detection rewrites them).
+    ``coefficients``: store the entry coefficients of the batched sweeps (``store_entry_coefficients``; only they
+    read them: ``ContactPipeline.uses_batches``).
     """
     nc = ti.min(con.contact_count[None], con.capacity)
     for c in range(nc):
@@ -359,14 +364,16 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
             con.contact_kinematic[c] = -ref - radius[i] * nrm
     for c in range(nc):
         con.contact_delassus[c] = _delassus(con, c, split_by_batch)
-    store_entry_coefficients(con)
+    if ti.static(coefficients):
+        store_entry_coefficients(con)
 
 
 @ti.func
 def store_entry_coefficients(con: ti.template()):
     """h_ci / D_hat_c of every CSR entry (vertex i, contact c), 0 where D_hat_c = 0: what the batch updates
     (``projection.apply_batch_corrections``) multiply each correction by, read in entry order instead of
-    gathered from the contact's four vertices, weights and D_hat.  Run wherever weights or D_hat change."""
+    gathered from the contact's four vertices, weights and D_hat.  Run wherever weights or D_hat change, when a sweep
+    in batches may follow (the sweeps one by one read the weights and D_hat themselves)."""
     for k in range(con.active_vertex_count[None]):
         i = con.active_vertex[k]
         for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
@@ -392,14 +399,14 @@ def _batch_order_after(c: ti.i32, d: ti.i32) -> bool:
 def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_base: ti.template(),
                     vertex_typical_length: ti.template(), vertex_dt_bend: ti.template(), dt: float,
                     gravity_norm: float, dynamic: ti.template(), first_new: ti.i32, split_by_batch: ti.template(),
-                    bending_time: ti.i32):
+                    bending_time: ti.i32, coefficients: ti.template()):
     """CSR vertex -> contacts (sorted), W_z (Sec. 4.5 "Collision constraint weights"), D_hat.
 
     Contacts from ``first_new`` on start from zero; with ``first_new`` = 0 (the proximity detection at the
     beginning of a step) the collision duals lambda_z are zeroed too.  Contacts appended later in the step
     (continuous-time detection) keep the earlier contacts' progress: their accumulated corrections
     r~ = D_hat r are rescaled to the new D_hat (more contacts on a vertex split its mass further), so the
-    impulses r they stand for are unchanged, and lambda_z is kept.
+    impulses r they stand for are unchanged, and lambda_z is kept.  ``coefficients``: as in ``relinearize_contacts``.
     """
     nc = ti.min(con.contact_count[None], con.capacity)
     for i in con.vertex_contact_count:
@@ -484,4 +491,5 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             con.contact_delta[c] = vec3(0.0)
             con.contact_status[c] = 0
         con.contact_delassus[c] = dh
-    store_entry_coefficients(con)
+    if ti.static(coefficients):
+        store_entry_coefficients(con)

@@ -59,6 +59,8 @@ class ContactPipeline:
         self.vertex_typical_length = ti.field(float, n)
         #: Bending time 2 L~^2/R sqrt(rho/E_b) of the vertex's strand (Sec. 4.5) [s], shape (vertex_count,).
         self.vertex_dt_bend = ti.field(float, n)
+        #: Slab of each vertex's strand for the slab-parallel sweeps (``contact.slabs``) [-], shape (vertex_count,).
+        self.vertex_slab = ti.field(ti.i32, n)
         self.set_coefficients()
         table = 1
         while table < 2 * n:
@@ -91,6 +93,9 @@ class ContactPipeline:
         #: contacts at the last detection: each of a sweep's 16 parallel loops costs a dispatch to the thread
         #: pool), and the correction's edge passes and acceleration too (CPU, fewer than ``_SERIAL_VERTICES``).
         self._serial_contacts = False
+        #: Whether the sweeps one by one of this step run in slab groups (``contact.slabs``: a CPU, and at least
+        #: ``_SERIAL_CONTACTS`` contacts at the detection, where the thread pool's dispatches pay).
+        self._slabs = False
         self._serial_strands = (not on_gpu()) and n < _SERIAL_VERTICES
         self._dynamic = True  # (the last detection's mode; ``detect`` sets it with its dt)
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
@@ -142,6 +147,9 @@ class ContactPipeline:
         self.vertex_weight_base.from_numpy(np.maximum(h["vertex_mass"], 1e-30).astype(f))
         self.vertex_typical_length.from_numpy(typical.astype(f))
         self.vertex_dt_bend.from_numpy((2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f))
+        from .slabs import vertex_slabs
+
+        self.vertex_slab.from_numpy(vertex_slabs(h["vertex_rest_position"][h["strand_vertex_start"]], strand))
         self.max_radius = float(radius.max())
 
     def _bending_time(self, dynamic: bool) -> int:
@@ -149,6 +157,27 @@ class ContactPipeline:
         if self.config.weight_time == WeightTime.PAPER or not dynamic:
             return BEND_ALL
         return BEND_BODY if self.config.weight_time == WeightTime.HAIR_STEP else BEND_NONE
+
+    def uses_batches(self, dynamic: bool) -> bool:
+        """Whether a sweep of this step may run in the paper's 8 batches (the z-step's ``projection_contact_order``,
+        the correction's ``correction_contact_order``; "auto": batches on a GPU, and on the CPU in the dynamic mode
+        for the z-step), so the entry coefficients they read must be stored (``narrow.store_entry_coefficients``)."""
+        cfg, gpu = self.config, on_gpu()
+        proj, corr = cfg.projection_contact_order, cfg.correction_contact_order
+        return (proj == CorrectionContactOrder.BATCHES or (proj == CorrectionContactOrder.AUTO and (gpu or dynamic))
+                or corr == CorrectionContactOrder.BATCHES or (corr == CorrectionContactOrder.AUTO and gpu))
+
+    def sweep_order(self, order, auto_one_by_one: bool):
+        """``serial`` of the sweeps (``projection.sweep_contacts``) for a contact order: ``"sequential"`` one by one in
+        index order; ``"auto"`` where ``auto_one_by_one``, one by one in slab groups (``contact.slabs``; in index
+        order where the contacts are few); otherwise the batches (on the launching thread where they are few)."""
+        from .projection import SEQUENTIAL, SLABS
+
+        if order == CorrectionContactOrder.SEQUENTIAL:
+            return SEQUENTIAL
+        if order == CorrectionContactOrder.AUTO and auto_one_by_one:
+            return SLABS if self._slabs else SEQUENTIAL
+        return self._serial_contacts
 
     @property
     def contact_count(self) -> int:
@@ -240,8 +269,16 @@ class ContactPipeline:
                           f"growing it to {new_cap} and detecting again (no contact dropped)", stacklevel=3)
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
+        auto = CorrectionContactOrder.AUTO
+        self._slabs = ((not on_gpu()) and total >= _SERIAL_CONTACTS
+                       and (cfg.correction_contact_order == auto or (cfg.projection_contact_order == auto and not dynamic)))
+        if self._slabs:
+            from .slabs import group_contacts
+
+            group_contacts(self.vertex_slab, self.con)  # (sorts the contacts by slab group)
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
-                        dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH, self._bending_time(dynamic))
+                        dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH, self._bending_time(dynamic),
+                        self.uses_batches(dynamic))
         self._serial_contacts = (not on_gpu()) and total < _SERIAL_CONTACTS
         self.detections += 1
         # Per-step statistics of the continuous passes and the late body contacts of this step.
@@ -290,7 +327,7 @@ class ContactPipeline:
         if added > 0:
             build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                             self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == MassSplitting.BATCH,
-                            self._bending_time(self._dynamic))
+                            self._bending_time(self._dynamic), self.uses_batches(self._dynamic))
         self.continuous_contacts += added
         return added
 
@@ -323,7 +360,7 @@ class ContactPipeline:
             self._grow_contacts(total, keep=first)
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                         self._dt, self._gn, self._dynamic, first, self.config.mass_splitting == MassSplitting.BATCH,
-                        self._bending_time(self._dynamic))
+                        self._bending_time(self._dynamic), self.uses_batches(self._dynamic))
         self.late_body_contacts += added
         return added
 
@@ -385,14 +422,10 @@ class ContactPipeline:
 
     def project(self, x, buf, sweeps: int) -> None:
         """The z-step and lambda_z update of one ADMM iteration (Sec. 4.5), then W_z for the global step."""
-        from .projection import SEQUENTIAL, projection_begin, projection_end, projection_sweep
+        from .projection import projection_begin, projection_end, projection_sweep
 
         projection_begin(x, self.con, False)
-        serial = self._serial_contacts
-        order = self.config.projection_contact_order
-        if order == CorrectionContactOrder.SEQUENTIAL or (order == CorrectionContactOrder.AUTO and not on_gpu()
-                                                          and not self._dynamic):
-            serial = SEQUENTIAL  # (each contact's push applied before the next is solved, on one thread)
+        serial = self.sweep_order(self.config.projection_contact_order, not on_gpu() and not self._dynamic)
         for _ in range(sweeps):
             projection_sweep(self.con, serial)
         projection_end(x, self.con, buf)

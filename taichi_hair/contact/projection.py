@@ -34,7 +34,7 @@ import numpy as np
 import taichi as ti
 
 from ..config import CorrectionLengths
-from ..fields import CONTACT_BATCHES
+from ..fields import CONTACT_BATCHES, CONTACT_SLABS
 from .colliders import body_transform, collider_distance
 
 vec3 = ti.math.vec3
@@ -72,29 +72,23 @@ def coulomb_local_solve(w, n, mu: float):
 
 @ti.func
 def begin_projection(x: ti.template(), con: ti.template()):
-    """z = x - lambda_z + W_z^-1 H^T D_hat^-1 r~ on contact vertices (warm start from the corrections so far)."""
+    """z = x - lambda_z + W_z^-1 H^T D_hat^-1 r~ on contact vertices (warm start from the corrections so far),
+    which is z = x: lambda_z is the sum of the pushes, W_z^-1 H^T D_hat^-1 r~.
+
+    Why, by induction over the projections of a step: the detection zeroes lambda_z and r~ (``build_adjacency``),
+    so the two are equal at first.  A projection starts at z_0 = x - lambda + P(r~) (P: the pushes the
+    accumulated corrections stand for) and every contact update adds its push to z and to P alike
+    (``solve_contacts_sequential``, ``apply_batch_corrections``), so it ends at z = x - lambda + P_new, and the
+    dual update lambda <- lambda + z - x (``update_contact_duals``, with the same x) gives lambda = P_new.  Contacts
+    appended within the step (continuous detection) keep their impulses, so P does not change then either (their
+    r~ is rescaled with D_hat; W_z of a vertex depends only on the vertex and, with ``WeightTime.HAIR_STEP``, on
+    whether it has a body contact, which the continuous passes never add).  So z = x to rounding, and summing
+    the pushes (~5 random reads per contact entry, 5.5 ms of each projection on the 120k-vertex groom, measured)
+    only added that rounding.  ``tests/test_contacts.py`` checks lambda_z = P after a step's projections.
+    """
     for k in range(con.active_vertex_count[None]):
         i = con.active_vertex[k]
-        z = x[i] - con.vertex_contact_dual[i]
-        iw = con.vertex_contact_inv_weight[i]
-        if iw > 0.0:
-            for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
-                c = con.vertex_contact_list[e]
-                dh = con.contact_delassus[c]
-                if dh > 0.0:
-                    z += (iw * _weight_of(con, c, i) / dh) * con.contact_accumulated[c]
-        else:
-            z = x[i]
-        con.vertex_z[i] = z
-
-
-@ti.func
-def _weight_of(con: ti.template(), c: ti.i32, i: ti.i32) -> float:
-    h = 0.0
-    for k in ti.static(range(4)):
-        if con.contact_vertex[c][k] == i:
-            h += con.contact_weight[c][k]
-    return h
+        con.vertex_z[i] = x[i]
 
 
 @ti.func
@@ -131,26 +125,73 @@ SEQUENTIAL = 2
 
 
 @ti.func
+def _solve_one(con: ti.template(), z: ti.template(), c: ti.i32):
+    """Steps (1) and (2) for contact c alone: its local solve, its push applied to z at once."""
+    dh = con.contact_delassus[c]
+    if dh > 0.0:
+        u_star = _contact_u(con, z, c)
+        r_old = con.contact_accumulated[c]
+        r_new, status = coulomb_local_solve(u_star - r_old, con.contact_normal[c], con.contact_friction[c])
+        d = r_new - r_old  # (applied here: no ``contact_delta`` for a vertex pass to read)
+        con.contact_accumulated[c] = r_new
+        con.contact_status[c] = status
+        for k in ti.static(range(4)):
+            v = con.contact_vertex[c][k]
+            if v >= 0:
+                iw = con.vertex_contact_inv_weight[v]
+                if iw > 0.0:
+                    # (Not ``+=``: in a parallel loop (``solve_contacts_slabs``) Taichi makes that an atomic add,
+                    # a compare-and-swap loop per component; no other thread touches v here.)
+                    z[v] = z[v] + iw * (con.contact_weight[c][k] / dh) * d
+
+
+@ti.func
 def solve_contacts_sequential(con: ti.template(), z: ti.template()):
     """Steps (1) and (2) for every contact in index order on the launching thread: a true Gauss-Seidel sweep,
     each contact seeing the pushes of those before it (no Jacobi sum within a batch)."""
     nc = ti.min(con.contact_count[None], con.capacity)
     ti.loop_config(serialize=True)
     for c in range(nc):
-        dh = con.contact_delassus[c]
-        if dh > 0.0:
-            u_star = _contact_u(con, z, c)
-            r_old = con.contact_accumulated[c]
-            r_new, status = coulomb_local_solve(u_star - r_old, con.contact_normal[c], con.contact_friction[c])
-            d = r_new - r_old  # (applied here: no ``contact_delta`` for a vertex pass to read)
-            con.contact_accumulated[c] = r_new
-            con.contact_status[c] = status
-            for k in ti.static(range(4)):
-                v = con.contact_vertex[c][k]
-                if v >= 0:
-                    iw = con.vertex_contact_inv_weight[v]
-                    if iw > 0.0:
-                        z[v] += iw * (con.contact_weight[c][k] / dh) * d
+        _solve_one(con, z, c)
+
+
+#: ``serial`` of the sweeps: the contacts one by one in slab groups, groups with disjoint vertices in parallel.
+SLABS = 3
+#: Loop iterations per slab group in ``solve_contacts_slabs`` [-].  Taichi 1.7 on a CPU hands a parallel loop to its
+#: threads in blocks of at least 512 iterations (its adaptive block size; ``ti.loop_config(block_dim=...)`` did not
+#: change it), so a loop over 8 groups ran on one thread (measured: no faster than serial); 512 iterations per
+#: group, all but the first empty, give each group a block of its own.
+_TASK_STRIDE = 512
+
+
+@ti.func
+def _solve_range(con: ti.template(), z: ti.template(), begin: ti.i32, end: ti.i32):
+    for c in range(begin, end):
+        _solve_one(con, z, c)
+
+
+@ti.func
+def solve_contacts_slabs(con: ti.template(), z: ti.template()):
+    """Steps (1) and (2) for every contact one by one, in the four phases of ``contact.slabs`` (each a parallel
+    loop over groups with disjoint vertex sets, one group per task; the groups sorted by ``slabs.group_contacts``)."""
+    S = ti.static(CONTACT_SLABS)
+    T = ti.static(_TASK_STRIDE)
+    start = ti.static(con.contact_group_start)
+    for k in range(S * T):  # (one group per T iterations: see _TASK_STRIDE)
+        if k % T == 0:
+            g = k // T
+            _solve_range(con, z, start[g], start[g + 1])
+    for k in range(S // 2 * T):  # between slabs 0|1, 2|3, ...
+        if k % T == 0:
+            g = S + 2 * (k // T)
+            _solve_range(con, z, start[g], start[g + 1])
+    for k in range((S - 1) // 2 * T):  # between slabs 1|2, 3|4, ...
+        if k % T == 0:
+            g = S + 2 * (k // T) + 1
+            _solve_range(con, z, start[g], start[g + 1])
+    ti.loop_config(serialize=True)
+    for _ in range(1):  # the rest, and the contacts appended since the detection
+        _solve_range(con, z, start[2 * S - 1], ti.min(con.contact_count[None], con.capacity))
 
 
 @ti.func
@@ -427,9 +468,12 @@ def projection_begin(x: ti.template(), con: ti.template(), correction: ti.templa
 @ti.func
 def sweep_contacts(con: ti.template(), serial: ti.template()):
     """Every contact once on z: the 8 batches in turn (``serial``: each loop on the launching thread), or with
-    ``serial = SEQUENTIAL`` each contact in index order, its push applied before the next is solved."""
+    ``serial = SEQUENTIAL`` each contact in index order, its push applied before the next is solved, or with
+    ``SLABS`` one by one in the slab groups of ``contact.slabs``, on several threads."""
     if ti.static(serial == SEQUENTIAL):
         solve_contacts_sequential(con, con.vertex_z)
+    elif ti.static(serial == SLABS):
+        solve_contacts_slabs(con, con.vertex_z)
     else:
         for batch in ti.static(range(BATCHES)):
             solve_batch_contacts(con, con.vertex_z, batch, serial)
@@ -444,7 +488,8 @@ def projection_sweep(con: ti.template(), serial: ti.template()):
     one after the other, so the batches stay sequential within one launch.  ``serial``: every loop runs on
     the launching thread (``ContactPipeline._serial_contacts``: where the contacts are few, the 16 dispatches to the
     thread pool cost more than the work; the same operations in the same order, so the same bits), or
-    ``SEQUENTIAL`` (the correction's contacts one by one, ``ContactConfig.correction_contact_order``).
+    ``SEQUENTIAL`` (the contacts one by one, ``ContactConfig.projection_contact_order``) or ``SLABS`` (the same in
+    slab groups, ``contact.slabs``).
     """
     sweep_contacts(con, serial)
 
@@ -459,7 +504,8 @@ def correction_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.temp
     A Gauss-Seidel pass over contacts and inextensibility together, so a crossed pair pushed back drags
     its strands' neighbouring vertices along instead of stretching the edges at the contact.  ``serial``: the
     contact loops on the launching thread (``projection_sweep``), or ``SEQUENTIAL``: no batches, every contact
-    in turn (``solve_contacts_sequential``, ``ContactConfig.correction_contact_order``); ``serial_strands``: the
+    in turn (``solve_contacts_sequential``, ``ContactConfig.correction_contact_order``), or ``SLABS``: the same in
+    slab groups (``contact.slabs``); ``serial_strands``: the
     edge passes on the launching thread too.
     """
     sweep_contacts(con, serial)

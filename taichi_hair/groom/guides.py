@@ -210,13 +210,18 @@ class GuideChoice:
 
     def strands(self, rest_points: np.ndarray, strand_offsets: np.ndarray, guide_ratio: float,
                 seed: int) -> np.ndarray:
-        """Sorted int64 indices of the guides (every strand for ``guide_ratio`` 1), a copy."""
+        """int64 indices of the guides (every strand, in order, for ``guide_ratio`` 1), a copy, ordered along the
+        principal axis of their roots: the simulation's strands in that order put each slab of the contact sweeps
+        (``contact.slabs``) in memory of its own (the sweeps 1.4x faster on 2 cores, measured there)."""
         if guide_ratio >= 1.0:
             return np.arange(len(strand_offsets) - 1)
         roots = rest_points.astype(np.float64)[strand_offsets[:-1]]
         key = (roots.tobytes(), guide_ratio, seed)
         if self._cached is not None and self._cached[0] == key:
             return self._cached[1].copy()
+        from ..contact.slabs import principal_axis_order
+
         guides = np.sort(select_guides(roots, guide_ratio, seed))
+        guides = guides[principal_axis_order(roots[guides])]
         self._cached = (key, guides)
         return guides.copy()

@@ -151,7 +151,7 @@ class GroomingSession:
 
     @property
     def guide_strands(self) -> np.ndarray:
-        """Indices of the simulated strands (the others are skinned), int64, sorted."""
+        """Indices of the simulated strands (the others are skinned), int64, in the simulation's order (``GuideChoice``)."""
         return self._guide_strands()
 
     # ------------------------------------------------------------------ log, undo, autosave
