@@ -79,7 +79,7 @@ class ContactPipeline:
         self.boxes = BoxGridFields(n, table, max(12 * n, 1 << 14))
         capacity = max(16, int(config.capacity_per_vertex * n))
         self.con = ContactFields(capacity, n)
-        self.stats_out = ti.field(float, 6)
+        self.stats_out = ti.field(float, 7)
         #: Edge lengths the geometric correction holds (rest, or before the correction) [m], shape (vertex_count,).
         self.edge_held_length = ti.field(float, n)
         #: Sweeps of the geometric correction in the last step (reported in ``statistics``).
@@ -481,10 +481,11 @@ class ContactPipeline:
         """
         import numpy as np
 
-        from .projection import contact_statistics
+        from .projection import OVERLAPS, contact_statistics
 
         con = self.con
-        contact_statistics(x, self.vertex_radius, self.colliders, con, self.stats_out, False)
+        overlaps = self.config.hair_hair and self.config.keep_rest_overlaps
+        contact_statistics(x, self.vertex_radius, self.colliders, con, self.stats_out, OVERLAPS if overlaps else False)
         o = self.stats_out.to_numpy()
         nc = self.contact_count
         p99 = 0.0
@@ -495,10 +496,7 @@ class ContactPipeline:
             if hair.any():
                 p99 = float(np.percentile(pen[hair], 99))
                 if self.config.keep_rest_overlaps:
-                    vtx = con.contact_vertex.to_numpy()[:nc][hair]
-                    rad = self.vertex_radius.to_numpy()
-                    full = rad[vtx[:, 0]] + rad[vtx[:, 2]]
-                    kept = int(np.count_nonzero(con.contact_thickness.to_numpy()[:nc][hair] < full * (1 - 1e-6)))
+                    kept = int(o[6])
         return {"contacts": nc, "sticking": int(o[0]), "sliding": int(o[1]),
                 "separating": int(o[2]), "max_penetration_m": max(float(o[3]), float(o[4]), 0.0),
                 "body_penetration_max_m": max(float(o[3]), 0.0), "hair_penetration_max_m": max(float(o[4]), 0.0),

@@ -401,13 +401,18 @@ def store_edge_lengths(edge: ti.template(), x: ti.template(), out_length: ti.tem
         out_length[j] = length
 
 
+#: ``with_status`` of ``contact_statistics``: also count the hair pairs thinner than r_a + r_b (no status).
+OVERLAPS = 2
+
+
 @ti.kernel
 def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(), con: ti.template(),
                        out: ti.template(), with_status: ti.template()):
     """Counts of the last projection and the penetrations of every contact at the current x.
 
     out = (sticking, sliding, separating, deepest body penetration [m], deepest hair-pair penetration [m],
-    hair pairs crossed [-]); ``con.contact_penetration`` gets each contact's penetration; ``with_status``
+    hair pairs crossed [-], hair pairs thinner than r_a + r_b (only with ``with_status`` = ``OVERLAPS``, else 0) [-]);
+    ``con.contact_penetration`` gets each contact's penetration; ``with_status`` (True)
     also copies each contact's status to ``con.contact_status_admm``.
 
     Hair pair: the signed gap g = n . (p_a - p_b) - (r_a + r_b) at the contact's barycentric points with its
@@ -418,15 +423,16 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
     planes, spheres and capsules, the voxel SDF for meshes) at the end-of-step transform.
     """
     nc = ti.min(con.contact_count[None], con.capacity)
-    if ti.static(with_status):
+    if ti.static(with_status == 1):
         out[0] = 0.0
         out[1] = 0.0
         out[2] = 0.0
     out[3] = 0.0
     out[4] = 0.0
     out[5] = 0.0
+    out[6] = 0.0
     for c in range(nc):
-        if ti.static(with_status):
+        if ti.static(with_status == 1):
             st = con.contact_status[c]
             con.contact_status_admm[c] = st
             if st == STICK:
@@ -447,6 +453,9 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
                 ti.atomic_add(out[5], 1.0)
             if pen > out[4]:  # (read first: the maximum only grows, and most contacts are below it)
                 ti.atomic_max(out[4], pen)
+            if ti.static(with_status == OVERLAPS):
+                if con.contact_thickness[c] < (radius[vtx[0]] + radius[vtx[2]]) * (1.0 - 1e-6):
+                    ti.atomic_add(out[6], 1.0)  # a pair closer at rest than r_a + r_b (``keep_rest_overlaps``)
         else:
             R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
             dist, nrm = collider_distance(cs, k, R.transpose() @ (x[vtx[0]] - T))
