@@ -927,13 +927,15 @@ def test_the_collision_dual_equals_the_sum_of_the_contact_pushes_so_each_z_step_
 def test_the_slab_parallel_sweep_keeps_every_contact_touches_disjoint_vertices_and_reaches_the_same_projection(
         monkeypatch):
     """``contact.slabs``: 16 parallel clamped rods side by side (roots along x, 90 um apart: each overlaps its
-    neighbours by 10 um) and a free rod across them all, pushed 0.2 mm into them.  The slab groups (forced on here:
+    neighbours by 10 um) and a free rod across them all (strand 0, its root first along x: the slabs are runs of
+    vertex indices), pushed 0.2 mm into them.  The slab groups (forced on here:
     the pipeline's threshold of 20,000 contacts set to 0) keep every contact of the detection (the same vertex
     tuples and weights, sorted), the groups of each parallel phase touch disjoint vertex sets, every phase has
     contacts, and the frictionless z-step (a strictly convex QP, unique solution) swept 400 times reaches the
-    projection of the plain one-by-one order (the detection's order, unsorted) to 1e-7 m (f32; measured 0.9 nm),
-    after one sweep it differs (another Gauss-Seidel order: 87 um measured); two runs give the same bits.  535
-    contacts: 224 in the slabs' own groups, 287 between neighbours, 24 in the rest."""
+    projection of the plain one-by-one order (the detection's order, unsorted) to 1e-7 m (f32; measured 1.5 nm),
+    after one sweep it differs (another Gauss-Seidel order: 16 um measured); two runs give the same bits.  532
+    contacts: 223 in the slabs' own groups, 285 between neighbours, 24 in the rest.  With the cross rod last the
+    slabs are not runs of vertex indices, and the pipeline does not use them."""
     from taichi_hair.contact import pipeline as pipeline_module
     from taichi_hair.contact.slabs import REST_GROUP
     from taichi_hair.fields import CONTACT_SLABS as S
@@ -941,13 +943,13 @@ def test_the_slab_parallel_sweep_keeps_every_contact_touches_disjoint_vertices_a
     monkeypatch.setattr(pipeline_module, "_SERIAL_CONTACTS", 0)
     mat = RodMaterial(radius=5e-5)
     b = GroomBuilder()
+    b.add_strand(line((-0.001, 1e-4, 0.0), (0.0024, 1e-4, 0.02), 11), mat, root="free")  # across, first along x
     for k in range(16):
         b.add_strand(line((9e-5 * k, 0.0, 0.0), (9e-5 * k, 0.0, 0.02), 11), mat)
-    b.add_strand(line((-0.001, 1e-4, 0.01), (0.0024, 1e-4, 0.01), 11), mat, root="free")
     model = b.finalize()
     st = model.state()
     x1 = st.positions().astype(np.float64)
-    x1[-11:, 1] -= 2e-4
+    x1[:11, 1] -= 2e-4
     out, keys = [], []
     for order in ("sequential", "auto", "auto"):
         # ("sequential" with the correction in batches: no slab groups, the detection's own order.)
@@ -956,7 +958,7 @@ def test_the_slab_parallel_sweep_keeps_every_contact_touches_disjoint_vertices_a
         solver = SolverADMM(model, SolverADMMConfig(contacts=cfg))
         pl = solver.contacts
         pl.detect(st, 1 / 96, (0.0, 0.0, 0.0), False)
-        assert pl._slabs == (order == "auto")
+        assert pl.slabs_contiguous and pl._slabs == (order == "auto")
         c, nc = pl.con, pl.contact_count
         vtx = c.contact_vertex.to_numpy()[:nc]
         w = c.contact_weight.to_numpy()[:nc]
@@ -990,6 +992,14 @@ def test_the_slab_parallel_sweep_keeps_every_contact_touches_disjoint_vertices_a
     assert first > 1e-7, first
     assert np.abs(out[1] - out[3]).max() < 1e-7, np.abs(out[1] - out[3]).max()
     assert np.array_equal(out[2], out[4]) and np.array_equal(out[3], out[5])
+    # The cross rod last instead: slab 0 is no run of vertex indices (threads of a phase would share cache lines),
+    # so the pipeline keeps the plain order.
+    b = GroomBuilder()
+    for k in range(16):
+        b.add_strand(line((9e-5 * k, 0.0, 0.0), (9e-5 * k, 0.0, 0.02), 11), mat)
+    b.add_strand(line((-0.001, 1e-4, 0.0), (0.0024, 1e-4, 0.02), 11), mat, root="free")
+    pl = SolverADMM(b.finalize(), SolverADMMConfig(contacts=ContactConfig(friction=0.0))).contacts
+    assert not pl.slabs_contiguous
 
 
 @pytest.mark.parametrize("lengths", ["rest", "before", "free", "rest_along_strands", "rest_contact_batches"])

@@ -93,8 +93,9 @@ class ContactPipeline:
         #: contacts at the last detection: each of a sweep's 16 parallel loops costs a dispatch to the thread
         #: pool), and the correction's edge passes and acceleration too (CPU, fewer than ``_SERIAL_VERTICES``).
         self._serial_contacts = False
-        #: Whether the sweeps one by one of this step run in slab groups (``contact.slabs``: a CPU, and at least
-        #: ``_SERIAL_CONTACTS`` contacts at the detection, where the thread pool's dispatches pay).
+        #: Whether the sweeps one by one of this step run in slab groups (``contact.slabs``: a CPU, the slabs
+        #: contiguous in memory, and at least ``_SERIAL_CONTACTS`` contacts at the detection, where the thread pool's
+        #: dispatches pay).
         self._slabs = False
         self._serial_strands = (not on_gpu()) and n < _SERIAL_VERTICES
         self._dynamic = True  # (the last detection's mode; ``detect`` sets it with its dt)
@@ -149,7 +150,11 @@ class ContactPipeline:
         self.vertex_dt_bend.from_numpy((2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f))
         from .slabs import vertex_slabs
 
-        self.vertex_slab.from_numpy(vertex_slabs(h["vertex_rest_position"][h["strand_vertex_start"]], strand))
+        slab = vertex_slabs(h["vertex_rest_position"][h["strand_vertex_start"]], strand)
+        self.vertex_slab.from_numpy(slab)
+        #: Whether each slab's vertices are one run of vertex indices (the model's strands ordered along the slabs'
+        #: axis, as the grooming tool's guides): only then do the slab sweeps run (``contact.slabs``).
+        self.slabs_contiguous = bool(np.all(np.diff(slab) >= 0))
         self.max_radius = float(radius.max())
 
     def _bending_time(self, dynamic: bool) -> int:
@@ -270,7 +275,7 @@ class ContactPipeline:
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
         auto = CorrectionContactOrder.AUTO
-        self._slabs = ((not on_gpu()) and total >= _SERIAL_CONTACTS
+        self._slabs = ((not on_gpu()) and total >= _SERIAL_CONTACTS and self.slabs_contiguous
                        and (cfg.correction_contact_order == auto or (cfg.projection_contact_order == auto and not dynamic)))
         if self._slabs:
             from .slabs import group_contacts

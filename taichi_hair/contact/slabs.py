@@ -21,7 +21,10 @@ number of cores (it is not the plain index order of ``"sequential"``: another Ga
 the model's (rest roots): where hair moves far from its roots' neighbours (a pile), more contacts fall to phase 4,
 which only costs speed.  The threads of a phase run at full speed only where the slabs' vertices lie apart in
 memory (else they write to shared cache lines): the grooming tool orders its guides along the same axis
-(``groom.guides.GuideChoice``).  Measured on the grooming benchmark's 8,600 guides (153k hair-hair contacts, 2
+(``groom.guides.GuideChoice``), and the pipeline uses the slabs only where each slab is one run of vertex indices
+(``ContactPipeline.slabs_contiguous``).  On the 1,000-strand hairball (strands in the order of its Fibonacci cap,
+not along the axis) the pile put 24-34 % of the contacts in the rest and the run was 5-25 % slower with slabs (two
+runs each, 2026-12-06).  Measured on the grooming benchmark's 8,600 guides (153k hair-hair contacts, 2
 cores, kernel profiler): 61 % of the contacts in the slabs' own groups, 28 % between neighbours, 11 % in the rest;
 a sweep 3.2 ms one by one in index order, 2.6 ms in slabs with the guides in index order (random in space), 1.9
 ms with the guides ordered (phase 1 at twice the serial rate).
