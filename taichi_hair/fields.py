@@ -303,8 +303,9 @@ class ContactFields:
         self.vertex_batch_start = ti.field(ti.i32, (n, CONTACT_BATCHES))
         #: Where each slab group of the contacts begins (``contact.slabs.group_contacts`` sorts the detection's
         #: contacts by group; contacts appended later in the step join the last group) [-], shape
-        #: (2 * CONTACT_SLABS + 1,); a contact's group, then the index it came from [-], shape (capacity,); scratch
-        #: copies of ``contact_vertex`` and ``contact_weight`` for the sort, shape (capacity,).
+        #: (2 * CONTACT_SLABS + 1,); the sort's scratch: each contact's group (then a copy of ``contact_collider``),
+        #: the index each sorted contact came from [-], shape (capacity,), and copies of ``contact_vertex`` and
+        #: ``contact_weight``, shape (capacity,).
         self.contact_group_start = ti.field(ti.i32, 2 * CONTACT_SLABS + 1)
         self.contact_group = ti.field(ti.i32, c)
         self.contact_order = ti.field(ti.i32, c)

@@ -1002,6 +1002,36 @@ def test_the_slab_parallel_sweep_keeps_every_contact_touches_disjoint_vertices_a
     assert not pl.slabs_contiguous
 
 
+def test_a_contact_buffer_grown_within_a_step_keeps_every_field_of_its_contacts():
+    """``ContactPipeline._grow_contacts`` (continuous detection or late body contacts overflowing the buffer mid-step)
+    keeps the first contacts' fields, their duals and the slab groups.  The contact thickness was left out until
+    2026-12-06: a pair grown past would have been re-linearised by the correction at thickness 0 (r_a + r_b of overlap
+    allowed).  Twelve rods pushed through a thirteenth (above); every kept field equal bit for bit."""
+    mat = RodMaterial(radius=5e-5)
+    b = GroomBuilder()
+    b.add_strand(line((-0.01, 0, 0.0), (0.01, 0, 0.0), 11), mat, root="free")
+    for k in range(12):
+        b.add_strand(line((0.0001 + 0.00015 * k, 1.2e-4, -0.01), (0.0001 + 0.00015 * k, 1.2e-4, 0.01), 11), mat,
+                     root="free")
+    model = b.finalize()
+    solver = SolverADMM(model, SolverADMMConfig(contacts=ContactConfig(friction=0.2, velocity_margin=0.0)))
+    pl = solver.contacts
+    pl.detect(model.state(), 1 / 96, (0.0, 0.0, 0.0), False)
+    nc = pl.contact_count
+    names = ("contact_vertex", "contact_weight", "contact_normal", "contact_kinematic", "contact_friction",
+             "contact_thickness", "contact_delassus", "contact_collider")
+    before = {n: getattr(pl.con, n).to_numpy()[:nc].copy() for n in names}
+    starts = pl.con.contact_group_start.to_numpy().copy()
+    capacity = pl.con.capacity
+    with pytest.warns(UserWarning, match="growing it"):
+        pl._grow_contacts(2 * capacity, keep=nc)
+    assert pl.con.capacity >= 2 * capacity and pl.contact_count == nc
+    for n in names:
+        assert np.array_equal(getattr(pl.con, n).to_numpy()[:nc], before[n]), n
+    assert np.array_equal(pl.con.contact_group_start.to_numpy(), starts)
+    assert before["contact_thickness"].min() > 0
+
+
 @pytest.mark.parametrize("lengths", ["rest", "before", "free", "rest_along_strands", "rest_contact_batches"])
 def test_geometric_correction_uncrosses_a_pair_and_holds_edge_lengths(lengths):
     """Rod B lies across rod A, 20 um above contact at x^t, and ends the ADMM iterations 1 mm below A's

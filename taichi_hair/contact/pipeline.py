@@ -415,12 +415,13 @@ class ContactPipeline:
                       f"growing it to {new_cap} (no contact dropped)", stacklevel=4)
         new = ContactFields(new_cap, self.model.vertex_count)
         for name in ("contact_vertex", "contact_weight", "contact_normal", "contact_kinematic", "contact_friction",
-                     "contact_delassus", "contact_accumulated", "contact_delta", "contact_collider",
-                     "contact_status"):
+                     "contact_thickness", "contact_delassus", "contact_accumulated", "contact_delta",
+                     "contact_collider", "contact_status"):
             a = getattr(new, name).to_numpy()
             a[:keep] = getattr(old, name).to_numpy()[:keep]
             getattr(new, name).from_numpy(a)
         new.vertex_contact_dual.copy_from(old.vertex_contact_dual)
+        new.contact_group_start.copy_from(old.contact_group_start)  # (the appended contacts join the last group)
         new.contact_count[None] = keep
         self.con = new
         self.grow_events += 1
