@@ -98,20 +98,14 @@ def group_contacts(vertex_slab: ti.template(), con: ti.template()):
             g = con.contact_group[c]
             con.contact_order[fill[g]] = c
             fill[g] += 1
+    # (each field the detection writes, and the scratch field of its type it passes through)
+    moved = ti.static(((con.contact_vertex, con.contact_vertex_scratch), (con.contact_weight, con.contact_weight_scratch),
+                       (con.contact_normal, con.contact_delta), (con.contact_kinematic, con.contact_accumulated),
+                       (con.contact_friction, con.contact_delassus), (con.contact_thickness, con.contact_penetration),
+                       (con.contact_collider, con.contact_group)))
     for j in range(nc):
-        c = con.contact_order[j]
-        con.contact_vertex_scratch[j] = con.contact_vertex[c]
-        con.contact_weight_scratch[j] = con.contact_weight[c]
-        con.contact_delta[j] = con.contact_normal[c]
-        con.contact_accumulated[j] = con.contact_kinematic[c]
-        con.contact_delassus[j] = con.contact_friction[c]
-        con.contact_penetration[j] = con.contact_thickness[c]
-        con.contact_group[j] = con.contact_collider[c]
+        for k in ti.static(range(len(moved))):
+            moved[k][1][j] = moved[k][0][con.contact_order[j]]
     for j in range(nc):
-        con.contact_vertex[j] = con.contact_vertex_scratch[j]
-        con.contact_weight[j] = con.contact_weight_scratch[j]
-        con.contact_normal[j] = con.contact_delta[j]
-        con.contact_kinematic[j] = con.contact_accumulated[j]
-        con.contact_friction[j] = con.contact_delassus[j]
-        con.contact_thickness[j] = con.contact_penetration[j]
-        con.contact_collider[j] = con.contact_group[j]
+        for k in ti.static(range(len(moved))):
+            moved[k][0][j] = moved[k][1][j]
