@@ -442,6 +442,22 @@ class PairFields:
         self.edge_pair_list = ti.field(ti.i32, capacity)
 
 
+class WarmFields:
+    """The contacts of the last quasistatic step and their impulses, for the next detection's warm start
+    (``contact.warm``): contact c's key (its first vertex a, and its second edge's first vertex b for a hair pair,
+    -1 - collider for a body contact) [-], impulse r_c = r~_c / D_hat_c [m^2/N], shape (capacity,); the CSR of those
+    contacts by a [-], shapes (vertex_count + 1,), (capacity,); how many [-], shape ()."""
+
+    def __init__(self, capacity: int, vertex_count: int):
+        self.capacity = capacity
+        self.warm_key_a = ti.field(ti.i32, capacity)
+        self.warm_key_b = ti.field(ti.i32, capacity)
+        self.warm_impulse = ti.field(vec3, capacity)
+        self.warm_start = ti.field(ti.i32, vertex_count + 1)
+        self.warm_order = ti.field(ti.i32, capacity)
+        self.warm_count = ti.field(ti.i32, ())
+
+
 class CCDFields:
     """Continuous-time detection (Sec. 4.5, ACCD): per-edge earliest impacts.
 

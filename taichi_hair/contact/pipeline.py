@@ -97,6 +97,9 @@ class ContactPipeline:
         #: contiguous in memory, and at least ``_SERIAL_CONTACTS`` contacts at the detection, where the thread pool's
         #: dispatches pay).
         self._slabs = False
+        #: The last quasistatic step's contact impulses for the next detection (``contact.warm``; allocated at the
+        #: first quasistatic step, so dynamic runs never allocate them), and whether they belong to this model.
+        self._warm, self._warm_valid = None, False
         self._serial_strands = (not on_gpu()) and n < _SERIAL_VERTICES
         self._dynamic = True  # (the last detection's mode; ``detect`` sets it with its dt)
         #: Continuous-time detection buffers (allocated here when ``continuous_detections`` > 0, so a step
@@ -129,6 +132,7 @@ class ContactPipeline:
 
         if hasattr(self, "pairs"):
             self.pairs.skin_valid = False  # radii and edges may have changed: the kept pairs are searched again
+            self._warm_valid = False  # (and the carried impulses are dropped)
 
         from ..model import _np_float
 
@@ -284,6 +288,11 @@ class ContactPipeline:
         build_adjacency(m.vertex, self.con, self.vertex_weight_base, self.vertex_typical_length, self.vertex_dt_bend,
                         dt, gn, dynamic, 0, cfg.mass_splitting == MassSplitting.BATCH, self._bending_time(dynamic),
                         self.uses_batches(dynamic))
+        if not dynamic and self._warm_valid:
+            from .warm import warm_impulses
+
+            warm_impulses(self.con, self._warm)  # (the last quasistatic step's impulses, contact by contact)
+        self._warm_valid = self._warm_valid and not dynamic
         self._serial_contacts = (not on_gpu()) and total < _SERIAL_CONTACTS
         self.detections += 1
         # Per-step statistics of the continuous passes and the late body contacts of this step.
@@ -449,10 +458,18 @@ class ContactPipeline:
         clear_contact_terms(self.con, buf)
 
     def count_status(self, x) -> None:
-        """Record the sticking/sliding/separating counts of the last ADMM projection (before correction)."""
+        """Record the sticking/sliding/separating counts of the last ADMM projection (before correction), and in the
+        quasistatic mode each contact's impulse for the next detection (``contact.warm.keep_impulses``)."""
+        from ..fields import WarmFields
         from .projection import contact_statistics
+        from .warm import keep_impulses
 
         contact_statistics(x, self.vertex_radius, self.colliders, self.con, self.stats_out, True)
+        if not self._dynamic:
+            if self._warm is None or self._warm.capacity < self.con.capacity:
+                self._warm = WarmFields(self.con.capacity, self.model.vertex_count)
+            keep_impulses(self.con, self._warm)
+            self._warm_valid = True
 
     def vertex_states(self, vertex_count: int):
         """Per vertex, the state of its contacts at the step's last ADMM projection (before the correction, as

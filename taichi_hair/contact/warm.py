@@ -1,0 +1,84 @@
+"""The contact impulses carried from one quasistatic step to the next (the quasistatic fight).
+
+Every detection makes the contacts anew, and the step's first ADMM iterations started from zero contact forces: a
+groom at rest (moving 0.04 mm per step) sank 60 um into its neighbours in each step's iterations (~1,100 contacts
+deeper than 10 um on the grooming benchmark's 8,600 guides) for the end-of-step correction to push out again.
+Here, in the quasistatic mode, :func:`keep_impulses` records each contact's impulse r = r~ / D_hat after the step's
+iterations, and :func:`warm_impulses` gives a contact of the next detection the impulse of the contact with the same
+key (the same two edges, or the same vertex and collider), r~ = r D_hat, and every contact vertex the collision dual
+of those impulses, lambda_z = W_z^-1 H^T D_hat^-1 r~, so that the z-step still starts at x
+(``projection.begin_projection``).  The local solves project each carried impulse into its new friction cone at the
+first sweep, and release it where the pair separates.  Measured (scratch ``/tmp/p/s21/warm.py``, 6 steps of the still
+groom): contacts deeper than 10 um after the iterations 1,167 -> 53, crossed 281 -> 40, the correction 15 -> 10
+sweeps.  Carrying the per-vertex dual instead diverged (BENCHMARKS.md): it cannot be released contact by contact.
+Dynamic runs start from zero as the paper does.
+"""
+
+import taichi as ti
+
+vec3 = ti.math.vec3
+
+
+@ti.func
+def _key_b(con: ti.template(), c: ti.i32) -> ti.i32:
+    b = -1 - con.contact_collider[c]
+    if con.contact_collider[c] < 0:
+        b = con.contact_vertex[c][2]
+    return b
+
+
+@ti.kernel
+def keep_impulses(con: ti.template(), warm: ti.template()):
+    """Record every contact's key and impulse r = r~ / D_hat, and the CSR of the contacts by first vertex."""
+    nc = ti.min(con.contact_count[None], con.capacity)
+    warm.warm_count[None] = nc
+    for c in range(nc):
+        warm.warm_key_a[c] = con.contact_vertex[c][0]
+        warm.warm_key_b[c] = _key_b(con, c)
+        dh = con.contact_delassus[c]
+        warm.warm_impulse[c] = con.contact_accumulated[c] / dh if dh > 0.0 else vec3(0.0)
+    n = warm.warm_start.shape[0] - 1
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        for i in range(n + 1):
+            warm.warm_start[i] = 0
+        for c in range(nc):
+            warm.warm_start[warm.warm_key_a[c] + 1] += 1
+        for i in range(n):
+            warm.warm_start[i + 1] += warm.warm_start[i]
+        for c in range(nc):  # (fill, moving each start to its end ...)
+            a = warm.warm_key_a[c]
+            warm.warm_order[warm.warm_start[a]] = c
+            warm.warm_start[a] += 1
+        for j in range(n):  # (... and back)
+            warm.warm_start[n - j] = warm.warm_start[n - j - 1]
+        warm.warm_start[0] = 0
+
+
+@ti.kernel
+def warm_impulses(con: ti.template(), warm: ti.template()):
+    """r~_c = r D_hat_c from the recorded contact with c's key (after ``narrow.build_adjacency``), then
+    lambda_z = W_z^-1 H^T D_hat^-1 r~ on every contact vertex."""
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for c in range(nc):
+        a = con.contact_vertex[c][0]
+        b = _key_b(con, c)
+        for j in range(warm.warm_start[a], warm.warm_start[a + 1]):
+            o = warm.warm_order[j]
+            if warm.warm_key_b[o] == b:
+                con.contact_accumulated[c] = warm.warm_impulse[o] * con.contact_delassus[c]
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        iw = con.vertex_contact_inv_weight[i]
+        lam = vec3(0.0)
+        if iw > 0.0:
+            for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
+                c = con.vertex_contact_list[e]
+                dh = con.contact_delassus[c]
+                if dh > 0.0:
+                    h = 0.0
+                    for q in ti.static(range(4)):
+                        if con.contact_vertex[c][q] == i:
+                            h += con.contact_weight[c][q]
+                    lam += (iw * h / dh) * con.contact_accumulated[c]
+        con.vertex_contact_dual[i] = lam
