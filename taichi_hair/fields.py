@@ -445,7 +445,7 @@ class PairFields:
 class WarmFields:
     """The contacts of the last quasistatic step and their impulses, for the next detection's warm start
     (``contact.warm``): contact c's key (its first vertex a, and its second edge's first vertex b for a hair pair,
-    -1 - collider for a body contact) [-], impulse r_c = r~_c / D_hat_c [m^2/N], shape (capacity,); the CSR of those
+    -1 for a body contact) [-], impulse r_c = r~_c / D_hat_c [m^2/N], shape (capacity,); the CSR of those
     contacts by a [-], shapes (vertex_count + 1,), (capacity,); how many [-], shape ()."""
 
     def __init__(self, capacity: int, vertex_count: int):

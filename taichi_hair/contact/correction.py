@@ -68,7 +68,7 @@ def correct(pl, x, x0, sweeps: int) -> None:
     if hold:
         store_edge_lengths(m.edge, x, pl.edge_held_length, cfg.correction_lengths == CorrectionLengths.REST)
     projection_begin(x, pl.con, True)
-    serial, small = pl.sweep_order(cfg.correction_contact_order, not on_gpu()), pl._serial_strands
+    serial, small = pl._correction_order(), pl._serial_strands
     tol = cfg.correction_tolerance if cfg.correction_tolerance > 0 else 0.25 * pl.max_radius
     cap = max(sweeps, cfg.correction_max_iterations)
     rho = cfg.correction_chebyshev_rho

@@ -171,10 +171,17 @@ class ContactPipeline:
         """Whether a sweep of this step may run in the paper's 8 batches (the z-step's ``projection_contact_order``,
         the correction's ``correction_contact_order``; "auto": batches on a GPU, and on the CPU in the dynamic mode
         for the z-step), so the entry coefficients they read must be stored (``narrow.store_entry_coefficients``)."""
-        cfg, gpu = self.config, on_gpu()
-        proj, corr = cfg.projection_contact_order, cfg.correction_contact_order
-        return (proj == CorrectionContactOrder.BATCHES or (proj == CorrectionContactOrder.AUTO and (gpu or dynamic))
-                or corr == CorrectionContactOrder.BATCHES or (corr == CorrectionContactOrder.AUTO and gpu))
+        from .projection import SEQUENTIAL, SLABS
+
+        return not {self._projection_order(dynamic), self._correction_order()} <= {SEQUENTIAL, SLABS}
+
+    def _projection_order(self, dynamic: bool):
+        """``serial`` of the z-step's sweeps (``sweep_order``; "auto": one by one in the quasistatic mode on a CPU)."""
+        return self.sweep_order(self.config.projection_contact_order, not on_gpu() and not dynamic)
+
+    def _correction_order(self):
+        """``serial`` of the correction's sweeps (``sweep_order``; "auto": one by one on a CPU)."""
+        return self.sweep_order(self.config.correction_contact_order, not on_gpu())
 
     def sweep_order(self, order, auto_one_by_one: bool):
         """``serial`` of the sweeps (``projection.sweep_contacts``) for a contact order: ``"sequential"`` one by one in
@@ -278,9 +285,10 @@ class ContactPipeline:
                           f"growing it to {new_cap} and detecting again (no contact dropped)", stacklevel=3)
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
-        auto = CorrectionContactOrder.AUTO
-        self._slabs = ((not on_gpu()) and total >= _SERIAL_CONTACTS and self.slabs_contiguous
-                       and (cfg.correction_contact_order == auto or (cfg.projection_contact_order == auto and not dynamic)))
+        from .projection import SLABS
+
+        self._slabs = (not on_gpu()) and total >= _SERIAL_CONTACTS and self.slabs_contiguous
+        self._slabs = self._slabs and SLABS in (self._projection_order(dynamic), self._correction_order())
         if self._slabs:
             from .slabs import group_contacts
 
@@ -440,7 +448,7 @@ class ContactPipeline:
         from .projection import projection_begin, projection_end, projection_sweep
 
         projection_begin(x, self.con, False)
-        serial = self.sweep_order(self.config.projection_contact_order, not on_gpu() and not self._dynamic)
+        serial = self._projection_order(self._dynamic)
         for _ in range(sweeps):
             projection_sweep(self.con, serial)
         projection_end(x, self.con, buf)

@@ -21,14 +21,6 @@ import taichi as ti
 vec3 = ti.math.vec3
 
 
-@ti.func
-def _key_b(con: ti.template(), c: ti.i32) -> ti.i32:
-    b = -1 - con.contact_collider[c]
-    if con.contact_collider[c] < 0:
-        b = con.contact_vertex[c][2]
-    return b
-
-
 @ti.kernel
 def keep_impulses(con: ti.template(), warm: ti.template()):
     """Record every contact's key and impulse r = r~ / D_hat, and the CSR of the contacts by first vertex."""
@@ -36,7 +28,7 @@ def keep_impulses(con: ti.template(), warm: ti.template()):
     warm.warm_count[None] = nc
     for c in range(nc):
         warm.warm_key_a[c] = con.contact_vertex[c][0]
-        warm.warm_key_b[c] = _key_b(con, c)
+        warm.warm_key_b[c] = con.contact_vertex[c][2]  # (-1 on a body contact: never a hair pair's key)
         dh = con.contact_delassus[c]
         warm.warm_impulse[c] = con.contact_accumulated[c] / dh if dh > 0.0 else vec3(0.0)
     n = warm.warm_start.shape[0] - 1
