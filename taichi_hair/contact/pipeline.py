@@ -130,10 +130,6 @@ class ContactPipeline:
         """(Re)compute the per-vertex contact coefficients from the Model (after an in-place Model update)."""
         import numpy as np
 
-        if hasattr(self, "pairs"):
-            self.pairs.skin_valid = False  # radii and edges may have changed: the kept pairs are searched again
-            self._warm_valid = False  # (and the carried impulses are dropped)
-
         from ..model import _np_float
 
         model = self.model
@@ -141,6 +137,19 @@ class ContactPipeline:
         f = _np_float()
         strand = h["vertex_strand"]
         radius = np.array([model.materials[s].radius for s in range(model.strand_count)])[strand]
+        # What the kept hair-hair pairs (a Verlet skin, ``pairs.find_candidates_skin``) depend on besides the
+        # positions: the radii (the reach), the strands and their edges (adjacent edges are skipped) and the
+        # kinematic vertices (pairs of kinematic edges are skipped).  An update that keeps them (a grooming edit:
+        # new rest shapes, the layout kept) keeps the pairs; the edges it moved search again, as after any motion
+        # (an edge searches once a vertex moved more than skin / 3 from where it last searched).  Anything else
+        # searches every edge again.
+        key = (radius.astype(f), np.asarray(strand).copy(), h["edge_rest_length"] > 0, h["vertex_is_fixed"] != 0)
+        if hasattr(self, "pairs"):
+            old = getattr(self, "_pair_key", None)
+            if old is None or not all(np.array_equal(a, b) for a, b in zip(old, key)):
+                self.pairs.skin_valid = False
+            self._warm_valid = False  # (the carried impulses are dropped: the edited strands' pairs have moved)
+        self._pair_key = key
         density = np.array([model.materials[s].density for s in range(model.strand_count)])[strand]
         e_bend = np.array([model.materials[s].youngs_modulus_bend for s in range(model.strand_count)])[strand]
         # Typical edge length L~ per strand (mean rest edge) for dt~ (Sec. 4.5).
