@@ -221,6 +221,31 @@ def test_bad_input_names_the_field(groom):
         interpolation_error(np.zeros((5, 3)), np.zeros((5, 3)), [2, 2])
 
 
+def test_bad_render_strands_are_named_by_strand_and_a_strand_may_start_where_the_last_one_ended(groom):
+    """compute_binding's checks of the render polylines (``guides._flat_polylines``, whole-array tests then the
+    three columns): a NaN, an infinity or a repeated point names its strand, as a list of polylines and as one
+    (S, m, 3) array (checked before the guides); a strand whose root is the previous strand's tip is not a
+    repeated point."""
+    strands, guides, model = groom
+    free = [s for s in range(1, len(strands)) if s not in set(np.asarray(guides).tolist())
+            and s - 1 not in set(np.asarray(guides).tolist())]
+    arr = np.array([p[:8] for p in strands], dtype=np.float64)  # (S, 8, 3): every strand has 8 to 12 vertices
+    for bad, value in ((free[0], np.nan), (free[1], np.inf), (free[2], -np.inf)):
+        for given in ([p.copy() for p in strands], arr.copy()):
+            given[bad][2, 1] = value
+            with pytest.raises(ValueError, match=rf"strands'\[{bad}\] has a non-finite coordinate"):
+                compute_binding(model, guides, given)
+    for given in ([p.copy() for p in strands], arr.copy()):
+        given[free[3]][3] = given[free[3]][2]
+        with pytest.raises(ValueError, match=rf"strands'\[{free[3]}\] has a zero-length edge"):
+            compute_binding(model, guides, given)
+    given = [p.copy() for p in strands]
+    s = free[4]
+    given[s] = given[s] - given[s][0] + given[s - 1][-1]  # strand s's root where strand s - 1 ends
+    h = compute_binding(model, guides, given)
+    assert np.array_equal(h["render_vertex_rest_position"][h["render_strand_vertex_start"][s]], given[s - 1][-1])
+
+
 # --------------------------------------------------------------------------- interpolation error
 def test_interpolation_error_and_colours_on_a_known_case():
     x = np.zeros((5, 3))

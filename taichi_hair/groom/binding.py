@@ -187,6 +187,12 @@ def _vertex_rows(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
 
 
+def _rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows of two (V, 3) arrays that differ in any coordinate, (V,) bool: ``np.any(a != b, axis=1)``, column by
+    column (30.8 -> 8 ms on 1.2 M rows: NumPy reduces along a short last axis slowly)."""
+    return (a[:, 0] != b[:, 0]) | (a[:, 1] != b[:, 1]) | (a[:, 2] != b[:, 2])
+
+
 def _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame):
     """The render strands an edit changed, directly or through a bound guide (sorted), or None when
     ``previous`` cannot be reused: another layout, a moved root, or ``frame="material"``."""
@@ -198,8 +204,8 @@ def _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame)
         return None
     if not (np.array_equal(P0[starts], P[starts]) and np.array_equal(X0[gstart], X[gstart])):
         return None  # a root moved: the nearest guides and the weights change
-    moved_r = np.logical_or.reduceat(np.any(P0 != P, axis=1), starts)
-    moved_g = np.logical_or.reduceat(np.any(X0 != X, axis=1), gstart) if gstart.size else np.zeros(0, bool)
+    moved_r = np.logical_or.reduceat(_rows_differ(P0, P), starts)
+    moved_g = np.logical_or.reduceat(_rows_differ(X0, X), gstart) if gstart.size else np.zeros(0, bool)
     moved = moved_r | np.any(moved_g[previous["render_strand_guides"]], axis=1)
     return np.nonzero(moved)[0]
 

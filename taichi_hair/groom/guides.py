@@ -178,10 +178,13 @@ def _flat_polylines(strands, name: str) -> tuple[np.ndarray, np.ndarray]:
         i = int(short[0])
         raise ValueError(f"{name}[{i}] has {counts[i]} vertices; a strand needs at least 2")
     starts = np.cumsum(counts) - counts  # (the strand of a bad row by a search: no per-vertex strand index)
-    bad = np.flatnonzero(~np.all(np.isfinite(flat), axis=1))
-    if bad.size:
+    # Whole-array tests, then the three columns combined: NumPy's reductions along a short last axis were 4-15x
+    # slower (26.5 ms for the finite test of 1.2 M render vertices, 26.9 ms for the repeated points; 1.8 and 6.3 ms).
+    finite = np.isfinite(flat)
+    if not finite.all():
+        bad = np.flatnonzero(~(finite[:, 0] & finite[:, 1] & finite[:, 2]))
         raise ValueError(f"{name}[{int(np.searchsorted(starts, bad[0], 'right')) - 1}] has a non-finite coordinate")
-    repeated = np.all(flat[1:] == flat[:-1], axis=1)
+    repeated = (flat[1:, 0] == flat[:-1, 0]) & (flat[1:, 1] == flat[:-1, 1]) & (flat[1:, 2] == flat[:-1, 2])
     repeated[starts[1:] - 1] = False  # (a strand's last vertex and the next strand's root)
     zero = np.flatnonzero(repeated)
     if zero.size:
