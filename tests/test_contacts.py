@@ -165,7 +165,8 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
     round at ~1e-9 m: 2.5e-11 m measured on the closest pair).  A detection where nothing moved searches no
     edge, the others a part of them (at least 8 of 12 fewer than half).  A Model update that keeps the radii,
     strands and kinematic vertices (a grooming edit: ``set_coefficients`` at step 8) keeps the pairs, and only the
-    edges that moved search; one that changes a radius (step 10) searches every edge again."""
+    edges that moved search; one that changes a radius (step 10), or a margin changed on the config (step 11),
+    searches every edge again."""
     from dataclasses import replace
     from taichi_hair.contact.pipeline import ContactPipeline
 
@@ -193,6 +194,9 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
             model.materials[0] = replace(model.materials[0], radius=1.5 * model.materials[0].radius)
             for p in pipes:
                 p.set_coefficients()
+        if step == 11:  # a wider margin, set on the config between steps: every edge searches again
+            for p in pipes:
+                p.config.margin = 3e-4
         lists = []
         for p in pipes:
             p.detect(st, 1.0, (0, -9.81, 0), False)
@@ -207,7 +211,7 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
             assert np.allclose(d0[a, :k], d1[a, :k], rtol=0.0, atol=1e-8), (step, a)
         assert c0.sum() > 100
         searched.append(pipes[0].statistics(st.vertex_position)["pair_skin_edges_searched"])
-    assert searched[0] == edges and searched[10] == edges, searched
+    assert searched[0] == edges and searched[10] == edges and searched[11] == edges, searched
     assert 0 < searched[8] < edges // 2, searched
     assert searched[5] == 0 and sum(0 < k < edges // 2 for k in searched) >= 8, searched
     assert pipes[1].pair_skin_searched == -1

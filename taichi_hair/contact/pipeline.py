@@ -71,7 +71,7 @@ class ContactPipeline:
         self.pairs = PairFields(n, max(256, int(config.pairs_per_edge * n)), skin=config.pair_skin > 0)
         #: Edges that searched in the last detection with a skin (-1: no skin, or the search without it ran);
         #: whether the skin was given up (its pairs did not fit the buffer).
-        self.pair_skin_searched, self._skin_off = -1, False
+        self.pair_skin_searched, self._skin_off, self._skin_reach = -1, False, None
         #: Rounds of the last hair-hair search, and rounds past the first since the pipeline was made.
         self.pair_rounds_last = 0
         self.pair_extra_rounds = 0
@@ -253,7 +253,9 @@ class ContactPipeline:
         self.hair_search_skipped = False
         # A Verlet skin (``pair_skin``, ``pairs.find_candidates_skin``) where the reach has no velocity part.
         skin = cfg.pair_skin if cfg.hair_hair and sweep == 0.0 and fall == 0.0 and not self._skin_off else 0.0
-        self.pairs.skin_valid, self.pair_skin_searched = self.pairs.skin_valid and skin > 0.0, -1
+        # (kept pairs hold what was within the reach + skin of their search: a changed margin or skin searches again)
+        self.pairs.skin_valid = self.pairs.skin_valid and skin > 0.0 and (margin, skin) == self._skin_reach
+        self.pair_skin_searched, self._skin_reach = -1, (margin, skin)
         if skin > 0.0:
             def fill_grid():  # the boxes grown by the skin, entered in the grid (which may grow: read it after)
                 proximity_boxes(m.edge, x, self.vertex_radius, g, self.boxes, margin + skin, 0.0, 0.0)
