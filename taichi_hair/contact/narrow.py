@@ -369,6 +369,21 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
 
 
 @ti.func
+def entry_coefficient(con: ti.template(), i: ti.i32, c: ti.i32) -> float:
+    """h_ci / D_hat_c of contact c at its vertex i (the sum of c's weights on i), 0 where D_hat_c = 0: the factor by
+    which c's accumulated r~ pushes vertex i (times W_z,i^-1)."""
+    dh = con.contact_delassus[c]
+    coef = 0.0
+    if dh > 0.0:
+        h = 0.0
+        for j in ti.static(range(4)):
+            if con.contact_vertex[c][j] == i:
+                h += con.contact_weight[c][j]
+        coef = h / dh
+    return coef
+
+
+@ti.func
 def store_entry_coefficients(con: ti.template()):
     """h_ci / D_hat_c of every CSR entry (vertex i, contact c), 0 where D_hat_c = 0: what the batch updates
     (``projection.apply_batch_corrections``) multiply each correction by, read in entry order instead of
@@ -377,16 +392,7 @@ def store_entry_coefficients(con: ti.template()):
     for k in range(con.active_vertex_count[None]):
         i = con.active_vertex[k]
         for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
-            c = con.vertex_contact_list[e]
-            dh = con.contact_delassus[c]
-            coef = 0.0
-            if dh > 0.0:
-                h = 0.0
-                for j in ti.static(range(4)):
-                    if con.contact_vertex[c][j] == i:
-                        h += con.contact_weight[c][j]
-                coef = h / dh
-            con.vertex_contact_coefficient[e] = coef
+            con.vertex_contact_coefficient[e] = entry_coefficient(con, i, con.vertex_contact_list[e])
 
 
 @ti.func

@@ -18,6 +18,8 @@ on ``tests/test_grooming.py``'s comb, whose claim is > 0.5 mm), and the fight is
 
 import taichi as ti
 
+from .narrow import entry_coefficient
+
 vec3 = ti.math.vec3
 
 
@@ -69,11 +71,5 @@ def warm_impulses(con: ti.template(), warm: ti.template()):
         if iw > 0.0:
             for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
                 c = con.vertex_contact_list[e]
-                dh = con.contact_delassus[c]
-                if dh > 0.0:
-                    h = 0.0
-                    for q in ti.static(range(4)):
-                        if con.contact_vertex[c][q] == i:
-                            h += con.contact_weight[c][q]
-                    lam += (iw * h / dh) * con.contact_accumulated[c]
+                lam += (iw * entry_coefficient(con, i, c)) * con.contact_accumulated[c]
         con.vertex_contact_dual[i] = lam
