@@ -25,7 +25,9 @@ Each figure is independent of the solver that made the frame (admm, shape, xpbd 
   ``REST_SPEED_M_S`` in its last frame;
 - shape drift: the distance of each free vertex of a clamped strand from its authored position carried by
   the strand's body, |x - (R_b x* + T_b)|, p90 and max [m]: how far the groom is from the shape it was
-  authored in (the sag-free rest pose, issue 14, is judged by it).
+  authored in (the sag-free rest pose, issue 14, is judged by it);
+- shape distance: the p90 distance between the free vertices and the authored polylines, both ways
+  (:func:`shape_distance`): the drift without who-is-where, measured on a run's last frame.
 """
 
 from __future__ import annotations
@@ -174,6 +176,66 @@ def shape_drift(positions, host: dict, body_rotation=None, body_translation=None
         ref = np.einsum("kij,kj->ki", R, ref) + T
     d = np.linalg.norm(x[sel] - ref, axis=1)
     return dict(drift_p90_m=float(np.percentile(d, 90)), drift_max_m=float(d.max()))
+
+
+def segment_set_distance(points, seg_a, seg_b, k: int = 16) -> np.ndarray:
+    """Exact distance [m] of each point (N, 3) to the nearest of the segments [a_j, b_j] ((S, 3) each).
+
+    A k-d tree of the segment midpoints gives each point its k nearest segments; a point whose k-th midpoint
+    is farther than its best distance plus half the longest segment has its answer (every point of a segment
+    lies within half its length of its midpoint), the others search the ball of that radius."""
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    a = np.asarray(seg_a, np.float64).reshape(-1, 3)
+    ab = np.asarray(seg_b, np.float64).reshape(-1, 3) - a
+    if len(p) == 0 or len(a) == 0:
+        return np.full(len(p), np.inf)
+    half = 0.5 * float(np.sqrt(np.max(np.einsum("ij,ij->i", ab, ab))))
+    ll = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+    tree = cKDTree(a + 0.5 * ab)
+
+    def to(pts, idx):  # distance of pts (M, 3) to segments idx (M, K)
+        d = pts[:, None, :] - a[idx]
+        t = np.clip(np.einsum("mkj,mkj->mk", d, ab[idx]) / ll[idx], 0.0, 1.0)
+        return np.sqrt(np.einsum("mkj,mkj->mk", *(2 * [d - t[..., None] * ab[idx]]))).min(axis=1)
+
+    k = min(k, len(a))
+    dm, idx = tree.query(p, k=k)
+    dm, idx = dm.reshape(len(p), k), idx.reshape(len(p), k)
+    best = to(p, idx)
+    for i in np.nonzero(dm[:, -1] <= best + half)[0]:
+        near = np.asarray(tree.query_ball_point(p[i], best[i] + half), np.int64)
+        if near.size:
+            best[i] = min(best[i], float(to(p[i:i + 1], near[None, :])[0]))
+    return best
+
+
+def shape_distance(positions, host: dict, body_rotation=None, body_translation=None) -> dict:
+    """How far the groom's shape is from its authored one, whichever strand is where: the p90 distance of the
+    free vertices of clamped strands to the authored polylines (carried by their bodies, as in
+    :func:`shape_drift`), and of the authored vertices to the current polylines; ``shape_distance_p90_m`` is the
+    larger [m].  Unlike the drift it does not grow when strands trade places inside the groom (a ponytail's
+    wisps reordered by a head turn): it measures the envelope and the strands' courses, not who is where."""
+    if not all(k in host for k in ("strand_body", "vertex_rest_position", "vertex_is_fixed")):
+        return {}
+    x = np.asarray(positions, np.float64)
+    strand = np.asarray(host["vertex_strand"])
+    body = np.asarray(host["strand_body"])[strand]
+    held = body >= 0
+    sel = held & (np.asarray(host["vertex_is_fixed"]) == 0)
+    if not sel.any():
+        return dict(shape_distance_p90_m=0.0)
+    ref = np.asarray(host["vertex_rest_position"], np.float64).copy()
+    if body_rotation is not None:
+        R = np.asarray(body_rotation, np.float64)[body[held]]
+        T = np.asarray(body_translation, np.float64)[body[held]]
+        ref[held] = np.einsum("kij,kj->ki", R, ref[held]) + T
+    rest = np.asarray(host["edge_rest_length"])
+    e = np.nonzero((rest[:-1] > 0) & held[:-1])[0]  # the edges j -> j + 1 of clamped strands
+    to_authored = segment_set_distance(x[sel], ref[e], ref[e + 1])
+    to_current = segment_set_distance(ref[sel], x[e], x[e + 1])
+    return dict(shape_distance_p90_m=float(max(np.percentile(to_authored, 90), np.percentile(to_current, 90))))
 
 
 # --------------------------------------------------------------------------- one frame

@@ -242,3 +242,42 @@ def test_shape_drift_is_measured_in_the_body_frame():
     x[3] += [0.003, 0, 0]
     assert abs(shape_drift(x, host, R, T)["drift_max_m"] - 0.003) < 1e-12
     assert shape_drift(x, {"vertex_strand": host["vertex_strand"]}) == {}
+
+
+def test_segment_set_distance_equals_the_brute_force_minimum():
+    """segment_set_distance: exact point-to-nearest-segment distance, against the brute-force minimum over all
+    segments (float64, 1e-12), with segments of very different lengths (the ball search path) and k = 2."""
+    from taichi_hair.quality import segment_set_distance
+
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-1, 1, (60, 3))
+    b = a + rng.normal(0, 1, (60, 3)) * rng.choice([0.01, 1.0], (60, 1))
+    p = rng.uniform(-1.5, 1.5, (200, 3))
+    ab = b - a
+    t = np.clip(np.einsum("pj,sj->ps", p, ab) - np.einsum("sj,sj->s", a, ab), 0, None) / np.einsum("sj,sj->s", ab, ab)
+    t = np.minimum(t, 1.0)
+    brute = np.linalg.norm(p[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=2).min(axis=1)
+    for k in (2, 16):
+        assert np.max(np.abs(segment_set_distance(p, a, b, k=k) - brute)) < 1e-12
+
+
+def test_shape_distance_ignores_strands_trading_places_but_not_a_moved_envelope():
+    """shape_distance: two parallel authored strands at x = 0 and 2 mm.  Their free vertices trading places give a
+    drift of 2 mm and a shape distance of 0 (the same courses, 1e-12).  Both moved 3 mm sideways (to x = 3 and
+    5 mm): the first is 1 mm from the authored course at 2 mm, the second 3 mm, and the authored ones 3 and 1 mm
+    from the moved ones, so the p90 both ways is 3 mm (1e-12)."""
+    from taichi_hair.quality import shape_distance, shape_drift
+
+    y = -np.arange(5) * 0.01
+    s0 = np.c_[np.zeros(5), y, np.zeros(5)]
+    s1 = s0 + [0.002, 0, 0]
+    rest = np.r_[s0, s1]
+    rl = np.tile(np.r_[np.full(4, 0.01), 0.0], 2)
+    host = dict(vertex_strand=np.repeat([0, 1], 5), strand_body=np.array([0, 0]), vertex_rest_position=rest,
+                vertex_is_fixed=np.tile([1, 0, 0, 0, 0], 2), edge_rest_length=rl)
+    swapped = np.r_[s1, s0]
+    swapped[[0, 5]] = rest[[0, 5]]  # the roots stay clamped; the free vertices trade places
+    assert shape_drift(swapped, host)["drift_p90_m"] > 0.0019
+    assert shape_distance(swapped, host)["shape_distance_p90_m"] < 1e-12
+    moved = rest + [0.003, 0, 0]
+    assert abs(shape_distance(moved, host)["shape_distance_p90_m"] - 0.003) < 1e-12

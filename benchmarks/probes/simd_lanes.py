@@ -15,7 +15,9 @@ written back; no branch unless ``--branch``), over the same strands and vertices
   vertex-major so that the eight strands' values are adjacent in memory (what LLVM's SLP vectoriser would need
   to fuse the eight copies);
 * ``lanes_8``: the same layout, the arithmetic written on 8-wide vectors (``ti.types.vector(8, f32)``), one
-  value per strand in each lane: the code a lanes schedule would need.
+  value per strand in each lane: the code a lanes schedule would need;
+* ``gather_8``: the arithmetic of ``lanes_8`` on the strand-major data of ``scalar``, gathered into the lanes and
+  scattered back at every vertex (what lanes would cost inside the strand schedule without a second layout).
 
 Prints million vertex-iterations per second and each variant's ratio to ``scalar`` in one run, and the largest
 difference of ``lanes_8``'s results from ``scalar``'s (the vector sin and cos round differently).  A diagnostic:
@@ -104,33 +106,53 @@ def main(argv=None) -> int:
                         for c in ti.static(range(3)):
                             y_vertex[k, c, s] = r[c]
 
+    @ti.func
+    def lanes_stage(p0, p1, p2):  # the stage on lists of three 8-wide vectors (one strand per lane)
+        e0 = [p1[c] - p0[c] for c in ti.static(range(3))]
+        e1 = [p2[c] - p1[c] for c in ti.static(range(3))]
+        n0 = ti.sqrt(e0[0] * e0[0] + e0[1] * e0[1] + e0[2] * e0[2])
+        n1 = ti.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+        t0 = [e0[c] / n0 for c in ti.static(range(3))]
+        t1 = [e1[c] / n1 for c in ti.static(range(3))]
+        d = t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]
+        kb = [2.0 * (t0[1] * t1[2] - t0[2] * t1[1]) / (1.0 + d),
+              2.0 * (t0[2] * t1[0] - t0[0] * t1[2]) / (1.0 + d),
+              2.0 * (t0[0] * t1[1] - t0[1] * t1[0]) / (1.0 + d)]
+        if ti.static(branch):
+            for c in ti.static(range(3)):
+                kb[c] = ti.select(d < -0.999, t0[c], kb[c])
+        n = ti.sqrt(kb[0] * kb[0] + kb[1] * kb[1] + kb[2] * kb[2])
+        cn, sn = ti.cos(n), ti.sin(n)
+        return [kb[c] * cn + t1[c] * sn for c in ti.static(range(3))]
+
     @ti.kernel
     def lanes_8(iterations: ti.i32):
         for g in range(G):
             for _ in range(iterations):
                 for k in range(1, M - 1):
-                    e0 = [x_lane[g, k, c] - x_lane[g, k - 1, c] for c in ti.static(range(3))]
-                    e1 = [x_lane[g, k + 1, c] - x_lane[g, k, c] for c in ti.static(range(3))]
-                    n0 = ti.sqrt(e0[0] * e0[0] + e0[1] * e0[1] + e0[2] * e0[2])
-                    n1 = ti.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
-                    t0 = [e0[c] / n0 for c in ti.static(range(3))]
-                    t1 = [e1[c] / n1 for c in ti.static(range(3))]
-                    d = t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]
-                    kb = [2.0 * (t0[1] * t1[2] - t0[2] * t1[1]) / (1.0 + d),
-                          2.0 * (t0[2] * t1[0] - t0[0] * t1[2]) / (1.0 + d),
-                          2.0 * (t0[0] * t1[1] - t0[1] * t1[0]) / (1.0 + d)]
-                    if ti.static(branch):
-                        for c in ti.static(range(3)):
-                            kb[c] = ti.select(d < -0.999, t0[c], kb[c])
-                    n = ti.sqrt(kb[0] * kb[0] + kb[1] * kb[1] + kb[2] * kb[2])
-                    cn, sn = ti.cos(n), ti.sin(n)
+                    r = lanes_stage([x_lane[g, k - 1, c] for c in ti.static(range(3))],
+                                    [x_lane[g, k, c] for c in ti.static(range(3))],
+                                    [x_lane[g, k + 1, c] for c in ti.static(range(3))])
                     for c in ti.static(range(3)):
-                        y_lane[g, k, c] = kb[c] * cn + t1[c] * sn
+                        y_lane[g, k, c] = r[c]
+
+    @ti.func
+    def gather(g, k):  # eight strands' vertex k from the strand-major layout, one strand per lane
+        return [V8([x_strand[g * L + q, k][c] for q in ti.static(range(L))]) for c in ti.static(range(3))]
+
+    @ti.kernel
+    def gather_8(iterations: ti.i32):
+        for g in range(G):
+            for _ in range(iterations):
+                for k in range(1, M - 1):
+                    r = lanes_stage(gather(g, k - 1), gather(g, k), gather(g, k + 1))
+                    for q in ti.static(range(L)):
+                        y_strand[g * L + q, k] = ti.Vector([r[0][q], r[1][q], r[2][q]])
 
     fill()
     rates = {}
     for name, kernel in (("scalar", scalar), ("interleaved_2", interleaved_2), ("unrolled_8", unrolled_8),
-                         ("lanes_8", lanes_8)):
+                         ("lanes_8", lanes_8), ("gather_8", gather_8)):
         kernel(1)
         ti.sync()
         best = float("inf")
@@ -140,6 +162,8 @@ def main(argv=None) -> int:
             ti.sync()
             best = min(best, time.perf_counter() - t)
         rates[name] = S * (M - 2) * a.iterations / best / 1e6
+    gathered = y_strand.to_numpy()[:, 1:-1]  # (gather_8 ran last; scalar again for the reference)
+    scalar(a.iterations)
     ref = y_strand.to_numpy()[:, 1:-1]
     lanes = y_lane.to_numpy().transpose(0, 3, 1, 2).reshape(S, M, 3)[:, 1:-1]
     unrolled = y_vertex.to_numpy().transpose(2, 0, 1)[:, 1:-1]
@@ -148,7 +172,8 @@ def main(argv=None) -> int:
     for name, r in rates.items():
         print(f"  {name:14s} {r:8.1f} M vertex-iterations/s  x{r / rates['scalar']:.2f}")
     print(f"  unrolled_8 against scalar: the same bits {bool(np.array_equal(unrolled, ref))}; lanes_8 against scalar: "
-          f"largest difference {diff.max():.2e}, p99 {np.percentile(diff, 99):.2e} (|y| up to {np.abs(ref).max():.1f})")
+          f"largest difference {diff.max():.2e}, p99 {np.percentile(diff, 99):.2e} (|y| up to {np.abs(ref).max():.1f}); "
+          f"gather_8 against lanes_8: the same bits {bool(np.array_equal(gathered, lanes))}")
     if a.json:
         with open(a.json, "w") as fh:
             json.dump({"strands": S, "vertices": M, "iterations": a.iterations, "branch": branch,

@@ -376,6 +376,14 @@ class SimulateRun:
             summary["mean_contacts"] = float(np.mean([r["contacts"] for r in rows]))
             summary["max_penetration_m"] = float(max(r["max_penetration_m"] for r in rows))
         summary["quality"] = _run_quality(rows, eq)
+        if "drift_p90_last_m" in summary["quality"] and not self.diverged:
+            from ..quality import shape_distance
+
+            # (the last frame only: a k-d tree of the groom's edges per frame would cost a large groom seconds)
+            d = shape_distance(self.state.positions(), model.host, self.control.body_rotation.to_numpy(),
+                               self.control.body_translation.to_numpy())
+            if d:
+                summary["quality"]["shape_distance_p90_last_m"] = d["shape_distance_p90_m"]
         summary["warnings"] = self.load_warnings
         if args.profile and not hasattr(solver, "stage_seconds"):
             print(f"note: --profile: solver {scene.solver!r} has no stage timers", file=sys.stderr)
