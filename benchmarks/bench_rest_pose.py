@@ -116,7 +116,8 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
     row = dict(strands=s["strands"], vertices=s["vertices"], ms_per_frame=s["ms_per_frame"],
                drift_p90_last_mm=1e3 * q["drift_p90_last_m"], drift_p90_max_mm=1e3 * q["drift_p90_max_m"],
                drift_max_mm=1e3 * q["drift_max_m"], strain_p99_max=q["strain_p99_max"], strain_max=q["strain_max"],
-               came_to_rest=q["came_to_rest"], shape_distance_p90_last_mm=1e3 * q.get("shape_distance_p90_last_m", float("nan")))
+               came_to_rest=q["came_to_rest"], shape_distance_p90_last_mm=1e3 * q.get("shape_distance_p90_last_m", float("nan")),
+               vertices_above_rest_speed=q.get("last_frame_vertices_above_rest_speed"))
     if "rest_pose" in s:
         r = s["rest_pose"]
         row.update(rest_pose_seconds=r["seconds"], strands_held=r["strands_held"],
@@ -176,7 +177,8 @@ def main(argv=None) -> int:
                 b = rows[groom]["sag-free"]
                 print(f"{groom:9s} {b['strands']:4d} strands, sag-free: p90 drift at the end {b['drift_p90_last_mm']:8.3f} mm, "
                       f"largest p90 over the run {b['drift_p90_max_mm']:.1f} mm; shape distance p90 at the end "
-                      f"{b['shape_distance_p90_last_mm']:.3f} mm; at rest {b['came_to_rest']}; "
+                      f"{b['shape_distance_p90_last_mm']:.3f} mm; at rest {b['came_to_rest']} "
+                      f"({b['vertices_above_rest_speed']} vertices above 1 cm/s); "
                       f"{b['ms_per_frame']:.0f} ms/frame", flush=True)
                 continue
             if len(poses) < 2:

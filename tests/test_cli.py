@@ -271,6 +271,12 @@ def test_simulate_strict_fails_on_a_stretched_run_and_reports_quality(tmp_path):
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     q = summary["quality"]
     assert q["strain_p99_max"] > 0.05 and q["vertices_inside_max"] == 0 and q["came_to_rest"] is False
+    # Not at rest: vertices above 1 cm/s are counted, and the p99 speed is at most the fastest vertex's.
+    assert q["last_frame_vertices_above_rest_speed"] > 0
+    assert q["last_frame_speed_p99_m_s"] <= q["last_frame_max_speed_m_s"] * (1 + 1e-6)
+    # Each vertex lies on the authored polylines' own course at its authored position, so the shape distance (to the
+    # nearest point of the polylines, both ways) is at most the drift (to that one point), percentile by percentile.
+    assert 0 <= q["shape_distance_p90_last_m"] <= q["drift_p90_last_m"] * (1 + 1e-9)
     with open(tmp_path / "o" / "stats.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 3 and float(rows[-1]["strain_p99"]) == q["strain_p99_max"]

@@ -384,6 +384,13 @@ class SimulateRun:
                                self.control.body_translation.to_numpy())
             if d:
                 summary["quality"]["shape_distance_p90_last_m"] = d["shape_distance_p90_m"]
+        if eq is None and not self.diverged and "came_to_rest" in summary["quality"]:
+            # How far from rest, beyond the one fastest vertex that the criterion reads.
+            from ..quality import REST_SPEED_M_S
+
+            speed = np.linalg.norm(self.state.vertex_velocity.to_numpy().astype(np.float64), axis=1)
+            summary["quality"].update(last_frame_speed_p99_m_s=float(np.percentile(speed, 99)) if speed.size else 0.0,
+                                      last_frame_vertices_above_rest_speed=int(np.count_nonzero(speed >= REST_SPEED_M_S)))
         summary["warnings"] = self.load_warnings
         if args.profile and not hasattr(solver, "stage_seconds"):
             print(f"note: --profile: solver {scene.solver!r} has no stage timers", file=sys.stderr)
