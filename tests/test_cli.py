@@ -280,4 +280,6 @@ def test_simulate_strict_fails_on_a_stretched_run_and_reports_quality(tmp_path):
     with open(tmp_path / "o" / "stats.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 3 and float(rows[-1]["strain_p99"]) == q["strain_p99_max"]
+    # The largest move over the last frame, as a speed: the column of the last row, and not 0 for strands still falling.
+    assert float(rows[-1]["max_frame_speed"]) == q["last_frame_max_move_speed_m_s"] > 0.0
     assert "body_penetration_max_m" in rows[0] and "vertices_inside" in rows[0]

@@ -268,6 +268,9 @@ class SimulateRun:
                        max_penetration_m=float(cs["max_penetration_m"]))
             self.contact_states[f] = self.solver.vertex_contact_state()
         row.update(_frame_quality(model, scene, self.control, x, v, getattr(self.solver, "contact_stats", None)))
+        # The largest move over the frame, as a speed [m/s]: what a viewer sees, where max_speed is the last
+        # substep's (a jitter within the frame shows in max_speed, not here).
+        row["max_frame_speed"] = float(np.max(np.linalg.norm(x - self.frames[f - 1], axis=1))) * scene.fps
         self.frames[f] = x
         return row
 
@@ -532,6 +535,8 @@ def _run_quality(rows, eq) -> dict:
         q.update(rest_asked=False, came_to_rest=bool(last < REST_SPEED_M_S),
                  rest_criterion=f"max vertex speed in the last frame < {REST_SPEED_M_S:g} m/s")
     q["last_frame_max_speed_m_s"] = last
+    if "max_frame_speed" in rows[-1]:
+        q["last_frame_max_move_speed_m_s"] = rows[-1]["max_frame_speed"]
     return q
 
 
