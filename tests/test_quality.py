@@ -246,7 +246,8 @@ def test_shape_drift_is_measured_in_the_body_frame():
 
 def test_segment_set_distance_equals_the_brute_force_minimum():
     """segment_set_distance: exact point-to-nearest-segment distance, against the brute-force minimum over all
-    segments (float64, 1e-12), with segments of very different lengths (the ball search path) and k = 2."""
+    segments (float64, 1e-12), with segments of very different lengths (the ball search path), k = 2 and the points
+    in chunks."""
     from taichi_hair.quality import segment_set_distance
 
     rng = np.random.default_rng(3)
@@ -257,8 +258,8 @@ def test_segment_set_distance_equals_the_brute_force_minimum():
     t = np.clip(np.einsum("pj,sj->ps", p, ab) - np.einsum("sj,sj->s", a, ab), 0, None) / np.einsum("sj,sj->s", ab, ab)
     t = np.minimum(t, 1.0)
     brute = np.linalg.norm(p[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=2).min(axis=1)
-    for k in (2, 16):
-        assert np.max(np.abs(segment_set_distance(p, a, b, k=k) - brute)) < 1e-12
+    for k, chunk in ((2, 7), (16, 1 << 16)):  # (chunks of 7 points: the last one short)
+        assert np.max(np.abs(segment_set_distance(p, a, b, k=k, chunk=chunk) - brute)) < 1e-12
 
 
 def test_shape_distance_ignores_strands_trading_places_but_not_a_moved_envelope():

@@ -379,21 +379,12 @@ class SimulateRun:
             summary["mean_contacts"] = float(np.mean([r["contacts"] for r in rows]))
             summary["max_penetration_m"] = float(max(r["max_penetration_m"] for r in rows))
         summary["quality"] = _run_quality(rows, eq)
-        if "drift_p90_last_m" in summary["quality"] and not self.diverged:
-            from ..quality import shape_distance
+        if not self.diverged:  # the last frame's shape distance and speeds
+            from ..quality import last_frame_figures
 
-            # (the last frame only: a k-d tree of the groom's edges per frame would cost a large groom seconds)
-            d = shape_distance(self.state.positions(), model.host, self.control.body_rotation.to_numpy(),
-                               self.control.body_translation.to_numpy())
-            if d:
-                summary["quality"]["shape_distance_p90_last_m"] = d["shape_distance_p90_m"]
-        if eq is None and not self.diverged and "came_to_rest" in summary["quality"]:
-            # How far from rest, beyond the one fastest vertex that the criterion reads.
-            from ..quality import REST_SPEED_M_S
-
-            speed = np.linalg.norm(self.state.vertex_velocity.to_numpy().astype(np.float64), axis=1)
-            summary["quality"].update(last_frame_speed_p99_m_s=float(np.percentile(speed, 99)) if speed.size else 0.0,
-                                      last_frame_vertices_above_rest_speed=int(np.count_nonzero(speed >= REST_SPEED_M_S)))
+            summary["quality"].update(last_frame_figures(
+                self.state.positions(), self.state.vertex_velocity.to_numpy(), model.host, self.control.body_rotation.to_numpy(),
+                self.control.body_translation.to_numpy(), "drift_p90_last_m" in summary["quality"], eq is None))
         summary["warnings"] = self.load_warnings
         if args.profile and not hasattr(solver, "stage_seconds"):
             print(f"note: --profile: solver {scene.solver!r} has no stage timers", file=sys.stderr)
