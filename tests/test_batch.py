@@ -132,6 +132,8 @@ seed = 2
         rows = {r["name"]: r for r in csv.DictReader(fh)}
     assert rows["good"]["status"] == rows["other"]["status"] == "done" and rows["bad"]["status"] == "failed"
     assert float(rows["good"]["strain_p99_max"]) < 0.01 and int(rows["good"]["frames"]) == 2
+    # The groom's drift and shape distance at the end (hanging strands on a body): shape distance <= drift, vertex by vertex.
+    assert 0.0 <= float(rows["good"]["shape_distance_p90_last_m"]) <= float(rows["good"]["drift_p90_last_m"])
     meta = json.loads((out / "batch.json").read_text())
     assert [r["name"] for r in meta["runs"]] == ["good", "bad", "other"]
     # the same run through simulate: the same frames, bit for bit

@@ -45,8 +45,8 @@ from .common import CLIError
 #: Columns of batch.csv (and keys of each run in batch.json).
 COLUMNS = ("name", "status", "exit_code", "resumed_from_frame", "task_seconds", "wall_seconds", "ms_per_frame",
            "frames", "strands", "vertices", "strain_p50_max", "strain_p99_max", "strain_max", "body_penetration_max_m",
-           "vertices_inside_max", "hair_penetration_max_m", "came_to_rest", "diverged", "error", "packed_with",
-           "command")
+           "vertices_inside_max", "hair_penetration_max_m", "came_to_rest", "drift_p90_last_m", "shape_distance_p90_last_m",
+           "diverged", "error", "packed_with", "command")
 #: simulate options that change only a run's groom: runs differing in these (and in groom.* / material.* keys)
 #: may share a pack (cli/simulate_pack.py decides whether they really can).
 PACK_NEUTRAL_OPTIONS = ("seed", "strands", "length", "vertices_per_strand")
@@ -256,7 +256,7 @@ def _row(name: str, out: str, argv: list, status: str, result: dict | None) -> d
                    ms_per_frame=s.get("ms_per_frame"), frames=s.get("frames"), strands=s.get("strands"),
                    vertices=s.get("vertices"), diverged=s.get("diverged"))
         for k in ("strain_p50_max", "strain_p99_max", "strain_max", "body_penetration_max_m",
-                  "vertices_inside_max", "came_to_rest"):
+                  "vertices_inside_max", "came_to_rest", "drift_p90_last_m", "shape_distance_p90_last_m"):
             row[k] = q.get(k)
         row["hair_penetration_max_m"] = q.get("hair_penetration_max_m_max")
     if result is not None:
