@@ -157,24 +157,34 @@ def body_penetration(positions, colliders, body_rotation, body_translation, vert
 
 
 # --------------------------------------------------------------------------- shape
+def _authored_shape(host: dict, body_rotation, body_translation):
+    """(ref, held, sel) for the drift and the shape distance: ref (V, 3) the authored shape x* carried by the bodies,
+    R_b x* + T_b, on the vertices of clamped strands (x* elsewhere) [m]; held: those vertices; sel: their free ones.
+    None for a host without an authored shape (hand-made frames).  Identity transforms when ``body_rotation`` is None."""
+    if not all(k in host for k in ("strand_body", "vertex_rest_position", "vertex_is_fixed")):
+        return None
+    body = np.asarray(host["strand_body"])[np.asarray(host["vertex_strand"])]
+    held = body >= 0
+    sel = held & (np.asarray(host["vertex_is_fixed"]) == 0)
+    ref = np.array(host["vertex_rest_position"], np.float64)
+    if body_rotation is not None and held.any():
+        R = np.asarray(body_rotation, np.float64)[body[held]]
+        T = np.asarray(body_translation, np.float64)[body[held]]
+        ref[held] = np.einsum("kij,kj->ki", R, ref[held]) + T
+    return ref, held, sel
+
+
 def shape_drift(positions, host: dict, body_rotation=None, body_translation=None) -> dict:
     """p90 and max of |x - (R_b x* + T_b)| over the free vertices of clamped strands [m] (see the module
     docstring); x* = ``host["vertex_rest_position"]``, the authored shape in the body frame.  Identity
     transforms when ``body_rotation`` is None."""
-    if not all(k in host for k in ("strand_body", "vertex_rest_position", "vertex_is_fixed")):
+    shape = _authored_shape(host, body_rotation, body_translation)
+    if shape is None:
         return {}  # a host without an authored shape (hand-made frames): no drift to measure
-    x = np.asarray(positions, np.float64)
-    strand = np.asarray(host["vertex_strand"])
-    body = np.asarray(host["strand_body"])[strand]
-    sel = (body >= 0) & (np.asarray(host["vertex_is_fixed"]) == 0)
+    ref, _, sel = shape
     if not sel.any():
         return dict(drift_p90_m=0.0, drift_max_m=0.0)
-    ref = np.asarray(host["vertex_rest_position"], np.float64)[sel]
-    if body_rotation is not None:
-        R = np.asarray(body_rotation, np.float64)[body[sel]]
-        T = np.asarray(body_translation, np.float64)[body[sel]]
-        ref = np.einsum("kij,kj->ki", R, ref) + T
-    d = np.linalg.norm(x[sel] - ref, axis=1)
+    d = np.linalg.norm(np.asarray(positions, np.float64)[sel] - ref[sel], axis=1)
     return dict(drift_p90_m=float(np.percentile(d, 90)), drift_max_m=float(d.max()))
 
 
@@ -240,20 +250,13 @@ def shape_distance(positions, host: dict, body_rotation=None, body_translation=N
     :func:`shape_drift`), and of the authored vertices to the current polylines; ``shape_distance_p90_m`` is the
     larger [m].  Unlike the drift it does not grow when strands trade places inside the groom (a ponytail's
     wisps reordered by a head turn): it measures the envelope and the strands' courses, not who is where."""
-    if not all(k in host for k in ("strand_body", "vertex_rest_position", "vertex_is_fixed")):
+    shape = _authored_shape(host, body_rotation, body_translation)
+    if shape is None:
         return {}
-    x = np.asarray(positions, np.float64)
-    strand = np.asarray(host["vertex_strand"])
-    body = np.asarray(host["strand_body"])[strand]
-    held = body >= 0
-    sel = held & (np.asarray(host["vertex_is_fixed"]) == 0)
+    ref, held, sel = shape
     if not sel.any():
         return dict(shape_distance_p90_m=0.0)
-    ref = np.asarray(host["vertex_rest_position"], np.float64).copy()
-    if body_rotation is not None:
-        R = np.asarray(body_rotation, np.float64)[body[held]]
-        T = np.asarray(body_translation, np.float64)[body[held]]
-        ref[held] = np.einsum("kij,kj->ki", R, ref[held]) + T
+    x = np.asarray(positions, np.float64)
     rest = np.asarray(host["edge_rest_length"])
     e = np.nonzero((rest[:-1] > 0) & held[:-1])[0]  # the edges j -> j + 1 of clamped strands
     to_authored = segment_set_distance(x[sel], ref[e], ref[e + 1])
