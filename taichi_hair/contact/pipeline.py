@@ -161,13 +161,13 @@ class ContactPipeline:
         self.vertex_weight_base.from_numpy(np.maximum(h["vertex_mass"], 1e-30).astype(f))
         self.vertex_typical_length.from_numpy(typical.astype(f))
         self.vertex_dt_bend.from_numpy((2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f))
-        from .slabs import vertex_slabs
+        from .slabs import slabs_are_runs, vertex_slabs
 
         slab = vertex_slabs(h["vertex_rest_position"][h["strand_vertex_start"]], strand)
         self.vertex_slab.from_numpy(slab)
         #: Whether each slab's vertices are one run of vertex indices (the model's strands ordered along the slabs'
-        #: axis, as the grooming tool's guides): only then do the slab sweeps run (``contact.slabs``).
-        self.slabs_contiguous = bool(np.all(np.diff(slab) >= 0))
+        #: axis, either way, as the grooming tool's guides): only then do the slab sweeps run (``contact.slabs``).
+        self.slabs_contiguous = slabs_are_runs(slab)
         self.max_radius = float(radius.max())
 
     def _bending_time(self, dynamic: bool) -> int:

@@ -41,13 +41,28 @@ REST_GROUP = 2 * CONTACT_SLABS - 1
 
 def principal_axis_order(points: np.ndarray) -> np.ndarray:
     """The indices of ``points`` (k, 3) [m] sorted along their principal axis (the direction of largest spread;
-    stable), int64 (k,)."""
+    stable), int64 (k,).
+
+    The axis is oriented so that its largest component is positive: the SVD's sign is arbitrary, and the same
+    points in another order (the grooming tool orders its guides with this, the pipeline's slabs rank the Model's
+    strands again) could otherwise come out reversed (they did on the grooming benchmark until 2026-12-06, so its
+    slabs ran backwards through memory and the slab sweeps were off)."""
     p = np.asarray(points, np.float64)
     if p.shape[0] < 2:
         return np.arange(p.shape[0])
     centred = p - p.mean(axis=0)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
-    return np.argsort(centred @ vt[0], kind="stable")
+    axis = vt[0] if vt[0][np.argmax(np.abs(vt[0]))] > 0 else -vt[0]
+    return np.argsort(centred @ axis, kind="stable")
+
+
+def slabs_are_runs(slab: np.ndarray) -> bool:
+    """Whether each slab of ``slab`` (vertex_count,) [-] is one run of vertex indices, in whatever order the runs
+    come (the condition of ``ContactPipeline.slabs_contiguous``)."""
+    slab = np.asarray(slab)
+    if slab.size == 0:
+        return True
+    return int(np.count_nonzero(np.diff(slab))) == len(np.unique(slab)) - 1
 
 
 def vertex_slabs(strand_root: np.ndarray, vertex_strand: np.ndarray) -> np.ndarray:
