@@ -364,6 +364,44 @@ def test_rebinding_after_an_edit_redoes_only_the_changed_strands_and_equals_a_fu
                               "transport") is None
 
 
+def test_skinning_rebind_uploads_only_the_strands_bound_again_and_its_fields_equal_a_new_binding():
+    """``SkinningLBS.rebind`` after an edit (one guide and one skinned strand 10 % longer, the guide Model updated in
+    place) uploads the rows of the strands bound again only (``upload_binding_rows``), and every binding field then
+    equals, bit for bit, that of a new SkinningLBS of the edited groom; the strands not bound again are fewer than
+    half, so the partial upload is what is tested."""
+    strands = smooth_groom()
+    guides, model = build_guides(strands, RodMaterial(), SkinningConfig(guide_ratio=0.1, seed=3))
+    sk = SkinningLBS(model, guides, strands)
+    edited = [p.copy() for p in strands]
+    s_edit = next(s for s in range(len(strands)) if s not in set(guides.tolist()))
+    for s in (int(guides[2]), s_edit):  # longer by 10 %, root kept
+        edited[s][1:] = edited[s][0] + 1.1 * (edited[s][1:] - edited[s][0])
+    guides2, model2 = build_guides(edited, RodMaterial(), SkinningConfig(guide_ratio=0.1, seed=3))
+    assert np.array_equal(guides2, guides)
+    model.update(model2.host)
+    calls = []
+    import taichi_hair.groom.skinning as skinning_module
+
+    real = skinning_module.upload_binding_rows
+
+    def spy(fields, rows, *a):
+        calls.append(np.asarray(rows).copy())
+        return real(fields, rows, *a)
+
+    before = sk.fields.render_vertex_bind_local.to_numpy()
+    skinning_module.upload_binding_rows = spy
+    try:
+        sk.rebind(edited)
+    finally:
+        skinning_module.upload_binding_rows = real
+    assert len(calls) == 1 and 0 < calls[0].size < sk.render_vertex_count // 2, [c.size for c in calls]
+    new = SkinningLBS(model2, guides, edited)
+    assert not np.array_equal(before, new.fields.render_vertex_bind_local.to_numpy())  # (the edit shows)
+    for name in ("render_vertex_rest_position", "render_vertex_body", "render_vertex_bind_edge",
+                 "render_vertex_bind_param", "render_vertex_bind_local", "render_vertex_bind_weight"):
+        assert np.array_equal(getattr(sk.fields, name).to_numpy(), getattr(new.fields, name).to_numpy()), name
+
+
 def _binding_numpy(model, guides, strands, K):
     """The binding's edge, parameter and frame coordinates evaluated in NumPy, float64, vectorised over
     the vertices (the implementation before the Taichi kernel), as an independent reference."""

@@ -47,7 +47,8 @@ def _arc_fractions(points: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, 
 
 
 def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count: int = 4,
-                    frame: str = "transport", guide_rest_frames=None, previous: dict | None = None) -> dict:
+                    frame: str = "transport", guide_rest_frames=None, previous: dict | None = None,
+                    rebound: list | None = None) -> dict:
     """Bind render strands to guides (float64; arrays on the host).  See the module docstring.
 
     ``previous``: the binding of the same layout before an edit (same strands, vertex counts, guides,
@@ -65,6 +66,8 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
         frame: ``"transport"`` or ``"material"`` (rest frames from ``guide_rest_frames``).
         guide_rest_frames: for ``"material"``: (tangent, d1, d2), each (guide_vertex_count, 3),
             of the rest State; ignored otherwise.
+        rebound: a list, or None; a list gets one item appended: the render strands bound again (sorted int64)
+            when ``previous`` was reused, None when the binding was done in full (every row may differ).
 
     Returns:
         dict of arrays; ``V`` render vertices, ``K`` = min(k, guide_count):
@@ -124,6 +127,8 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     geometry = (X, gstart, gcount, f_g, t, d1, d2, guide_of_strand)
 
     redo = _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame)
+    if rebound is not None:
+        rebound.append(redo)
     if redo is not None:
         out = dict(previous)
         out["render_vertex_rest_position"] = P

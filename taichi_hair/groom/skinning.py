@@ -130,6 +130,22 @@ def upload_binding(sk: ti.template(), rest: ti.types.ndarray(dtype=ti.f64, ndim=
 
 
 @ti.kernel
+def upload_binding_rows(sk: ti.template(), rows: ti.types.ndarray(dtype=ti.i64, ndim=1),
+                        rest: ti.types.ndarray(dtype=ti.f64, ndim=2), edge: ti.types.ndarray(dtype=ti.i64, ndim=2),
+                        param: ti.types.ndarray(dtype=ti.f64, ndim=2), local: ti.types.ndarray(dtype=ti.f64, ndim=3)):
+    """``upload_binding`` of the render vertices ``rows`` only, without the weights and bodies (a rebind keeps them):
+    the same casts, so the fields equal a full upload of the same arrays."""
+    K = ti.static(sk.render_vertex_bind_edge.shape[1])
+    for r in range(rows.shape[0]):
+        v = rows[r]
+        sk.render_vertex_rest_position[v] = ti.Vector([rest[v, 0], rest[v, 1], rest[v, 2]], float)
+        for k in ti.static(range(K)):
+            sk.render_vertex_bind_edge[v, k] = ti.cast(edge[v, k], ti.i32)
+            sk.render_vertex_bind_param[v, k] = ti.cast(param[v, k], float)
+            sk.render_vertex_bind_local[v, k] = ti.Vector([local[v, k, 0], local[v, k, 1], local[v, k, 2]], float)
+
+
+@ti.kernel
 def compute_guide_frames_transport(
     vertex: ti.template(),
     strand: ti.template(),
@@ -236,14 +252,14 @@ class SkinningLBS:
         self.fields = SkinningFields(self.render_vertex_count, self.neighbour_count, guide_model.vertex_count)
         self._upload(h)
 
-    def _binding(self, strands, previous: dict | None = None) -> dict:
+    def _binding(self, strands, previous: dict | None = None, rebound: list | None = None) -> dict:
         rest_frames = None
         if self.config.frame == "material":
             rest = self.guide_model.state()
             rest_frames = (rest.edge_tangent.to_numpy(), rest.edge_material_d1.to_numpy(),
                            rest.edge_material_d2.to_numpy())
         h = compute_binding(self.guide_model, self.guide_indices, strands, self.config.neighbour_count,
-                            self.config.frame, rest_frames, previous)
+                            self.config.frame, rest_frames, previous, rebound)
         ns = h["render_strand_vertex_count"].shape[0]
         bodies = np.asarray(_per_strand(self._strand_body, ns, "SkinningLBS: field 'strand_body'", 0),
                             dtype=np.int64)
@@ -254,10 +270,24 @@ class SkinningLBS:
         h["render_vertex_body"] = vertex_body
         return h
 
-    def _upload(self, h: dict) -> None:
+    def _upload(self, h: dict, strands=None) -> None:
         """The binding into the fields, cast to the fields' precision in one kernel (``upload_binding``; NumPy's
-        ``astype`` of the 1.2 M-vertex arrays of the grooming benchmark took 0.16 s of an edit's update)."""
+        ``astype`` of the 1.2 M-vertex arrays of the grooming benchmark took 0.16 s of an edit's update).  With
+        ``strands`` (the render strands a rebind bound again; the other rows, their weights and bodies are as
+        uploaded before), only their vertices' rest positions and bindings (``upload_binding_rows``: 22 -> ~9 ms
+        for the grooming benchmark's edit of 8,600 strands)."""
         self.host = h
+        if strands is not None:
+            from .binding import _vertex_rows
+
+            rows = _vertex_rows(h["render_strand_vertex_start"][strands], h["render_strand_vertex_count"][strands])
+            if rows.size:
+                upload_binding_rows(self.fields, np.ascontiguousarray(rows, np.int64),
+                                    np.ascontiguousarray(h["render_vertex_rest_position"], np.float64),
+                                    np.ascontiguousarray(h["render_vertex_bind_edge"], np.int64),
+                                    np.ascontiguousarray(h["render_vertex_bind_param"], np.float64),
+                                    np.ascontiguousarray(h["render_vertex_bind_local"], np.float64))
+            return
         upload_binding(self.fields, np.ascontiguousarray(h["render_vertex_rest_position"], np.float64),
                        np.ascontiguousarray(h["render_vertex_body"], np.int32),
                        np.ascontiguousarray(h["render_vertex_bind_edge"], np.int64),
@@ -273,12 +303,13 @@ class SkinningLBS:
         (``frame="material"`` reads the rest frames from a new rest State of the guide Model:
         that allocates one State per call.)  With ``frame="transport"`` and no root moved, only the
         render strands that changed, or whose guides did, are bound again (``compute_binding(previous=)``)."""
-        h = self._binding(strands, self.host)
+        rebound = []
+        h = self._binding(strands, self.host, rebound)
         if not (np.array_equal(h["render_strand_vertex_count"], self.host["render_strand_vertex_count"])
                 and h["render_vertex_bind_edge"].shape == self.host["render_vertex_bind_edge"].shape):
             raise ValueError("SkinningLBS.rebind: the render strands' vertex counts (or the neighbour count) "
                              "differ from the bound ones; build a new SkinningLBS")
-        self._upload(h)
+        self._upload(h, rebound[0])
 
     def deform(self, guide_state: State, control: Control) -> None:
         """Skin the render strands to ``guide_state`` (positions, and frames for

@@ -1,0 +1,100 @@
+"""The contact sweeps in slab groups against index order, on the grooming benchmark's groom, in one process.
+
+Run from the repository root:
+    python3 benchmarks/probes/slab_sweeps.py [--strands 86000] [--steps 8] [--sweeps 20] [--out FILE.json]
+
+The groom of ``benchmarks/bench_groom.py`` (wavy strands x 14 vertices on ``assets/head.obj``, 10 % sag-free guides,
+hair-hair contacts, 10 iterations per step).  This 2-core VM's speed drifts by 20-50 % over minutes, so two runs of
+the benchmark (one per commit) cannot resolve a 5-10 % change; this probe alternates the two orders inside one
+process, on the same contacts:
+
+1. *Sweeps*: after three steps, ``--sweeps`` z-step sweeps in index order (``projection.SEQUENTIAL``) then as many in
+   slab groups (``projection.SLABS``, ``contact.slabs``) from the same z, six times over (ms per sweep each time).
+   Both run on the contacts sorted by slab group, so they are the same Gauss-Seidel order (the same result); only
+   the threads differ.
+2. *Steps*: ``--steps`` pairs of whole steps, one with the slabs (``ContactPipeline.slabs_contiguous`` left as the
+   Model gives it) and one without (set to False before the step: the detection's own order, one thread), in turn
+   (ms per step and the correction's sweeps of each).  Their Gauss-Seidel orders differ, so their sweeps may too.
+
+Prints the times, their medians and ratios; a diagnostic, not a benchmark.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--strands", type=int, default=86000)
+    p.add_argument("--steps", type=int, default=8)
+    p.add_argument("--sweeps", type=int, default=20)
+    p.add_argument("--out", default=None)
+    a = p.parse_args(argv)
+    import taichi as ti
+
+    ti.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN)
+    from taichi_hair.cli.common import no_numpy_huge_pages
+    from taichi_hair.contact.projection import SEQUENTIAL, SLABS, projection_sweep
+    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
+    from taichi_hair.groom.session import GroomingConfig, GroomingSession
+
+    no_numpy_huge_pages()
+    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=a.strands, vertices_per_strand=14,
+                                                        length=0.25, seed=0))
+    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
+                                                    rest_pose="sag-free"))
+    session._ensure_built()
+    sim = session._sim
+    pipeline = sim.solver.contacts
+    runs = bool(pipeline.slabs_contiguous)
+    print(f"{sim.model.strand_count} guides; the Model's slabs are runs of vertex indices: {runs}")
+    for _ in range(3):
+        sim.step()
+    sweeps = {"index order": [], "slabs": []}
+    if pipeline._slabs:
+        z0 = pipeline.con.vertex_z.to_numpy()
+        for _ in range(6):
+            for name, mode in (("index order", SEQUENTIAL), ("slabs", SLABS)):
+                pipeline.con.vertex_z.from_numpy(z0)
+                projection_sweep(pipeline.con, mode)
+                ti.sync()
+                t = time.perf_counter()
+                for _ in range(a.sweeps):
+                    projection_sweep(pipeline.con, mode)
+                ti.sync()
+                sweeps[name].append((time.perf_counter() - t) / a.sweeps * 1e3)
+        for name, v in sweeps.items():
+            print(f"sweep, {name}: " + " ".join(f"{t:.2f}" for t in v) + f" ms (median {np.median(v):.2f})")
+        print(f"sweep: index order / slabs {np.median(sweeps['index order']) / np.median(sweeps['slabs']):.2f}")
+    else:
+        print(f"no slab sweeps at this step ({pipeline.contact_count} contacts): sweeps not compared")
+    steps = {"slabs": [], "index order": []}
+    for _ in range(a.steps):
+        for name, on in (("slabs", runs), ("index order", False)):
+            pipeline.slabs_contiguous = on
+            ti.sync()
+            t = time.perf_counter()
+            sim.step()
+            ti.sync()
+            steps[name].append({"ms": (time.perf_counter() - t) * 1e3, "correction_sweeps": pipeline.correction_sweeps_last,
+                                "slab_sweeps": bool(pipeline._slabs)})
+    pipeline.slabs_contiguous = runs
+    for name, v in steps.items():
+        ms = [r["ms"] for r in v]
+        print(f"step, {name}: " + " ".join(f"{t:.0f}" for t in ms) + f" ms (median {np.median(ms):.0f}); correction sweeps "
+              f"{[r['correction_sweeps'] for r in v]}; slab sweeps used {sorted({r['slab_sweeps'] for r in v})}")
+    ratio = np.median([r["ms"] for r in steps["index order"]]) / np.median([r["ms"] for r in steps["slabs"]])
+    print(f"step: index order / slabs {ratio:.2f}")
+    if a.out:
+        with open(a.out, "w") as fh:
+            json.dump({"strands": a.strands, "slabs_are_runs": runs, "sweep_ms": sweeps, "steps": steps}, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
