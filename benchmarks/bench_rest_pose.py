@@ -3,7 +3,7 @@
     python3 benchmarks/bench_rest_pose.py [--frames N] [--strands 300] [--grooms straight,wavy,curly,ponytail]
         [--motion still|head_turn] [--contacts all|body] [--iterations N] [--amplitude DEG] [--air-viscosity XI]
         [--friction MU] [--body-friction MU] [--weight-time paper|step|hair-step] [--rest-poses authored,sag-free]
-        [--out benchmarks/results/rest_pose.json]
+        [--arch cpu|cuda] [--out benchmarks/results/rest_pose.json]
 
 For every groom: the scene (``assets/scenes/head_turn.toml`` with the generator style swapped, or
 ``assets/scenes/ponytail.toml``) with its body still (``--motion still``) or turning, hair-hair and body contacts
@@ -104,7 +104,7 @@ def run(groom: str, rest_pose: str, args, work: str) -> dict:
         fh.write(text)
     out = os.path.join(work, f"{groom}_{rest_pose}")
     cmd = [sys.executable, "-m", "taichi_hair.cli", "simulate", path, "--rest-pose", rest_pose, "--frames",
-           str(args.frames), "--out", out, "--quiet"]
+           str(args.frames), "--out", out, "--quiet", "--arch", args.arch]
     if groom != "ponytail":
         cmd += ["--strands", str(args.strands)]
     p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
@@ -161,6 +161,7 @@ def main(argv=None) -> int:
     ap.add_argument("--weight-time", choices=("paper", "step", "hair-step"), default=None,
                     help="ContactConfig.weight_time of the hair-hair and body contacts (default: the scene's, hair-step)")
     ap.add_argument("--rest-poses", default="authored,sag-free", help="which runs: authored, sag-free or both")
+    ap.add_argument("--arch", default="cpu", help="Taichi arch of the simulate runs: cpu (default), cuda, gpu, vulkan")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose.json"))
     args = ap.parse_args(argv)
     poses = [p for p in args.rest_poses.split(",") if p]
@@ -200,7 +201,8 @@ def main(argv=None) -> int:
     bench.write(args.out, dict(frames=args.frames, motion=args.motion, contacts=args.contacts,
                                iterations=args.iterations or 10, amplitude=args.amplitude or 40.0,
                                air_viscosity=args.air_viscosity, friction=args.friction,
-                               body_friction=args.body_friction, weight_time=args.weight_time, grooms=rows))
+                               body_friction=args.body_friction, weight_time=args.weight_time, arch=args.arch,
+                               grooms=rows))
     print(f"wrote {args.out}")
     return 0
 

@@ -1,7 +1,7 @@
 """Sag-free rest pose solve time at the paper's groom size (issue 14, item 4), with and without the body's support.
 
     python3 benchmarks/bench_rest_pose_solve.py [--strands 8600] [--vertices 32] [--style wavy]
-        [--supports none,unheld,all] [--out benchmarks/results/rest_pose_solve.json]
+        [--supports none,unheld,all] [--arch cpu] [--out benchmarks/results/rest_pose_solve.json]
 
 The groom: ``assets/scenes/head_turn.toml``'s generator (``--style``, ``--strands`` guides of ``--vertices``
 vertices on ``assets/head.obj``), the head mesh as its collider, body still.  For each support rule
@@ -34,6 +34,8 @@ def main(argv=None) -> int:
     ap.add_argument("--vertices", type=int, default=32)
     ap.add_argument("--style", choices=("straight", "wavy", "curly"), default="wavy")
     ap.add_argument("--supports", default="none,unheld,all")
+    ap.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan"), help="Taichi arch (the rest-pose solve "
+                    "itself runs on the host; the arch is that of the Model's fields)")
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "results", "rest_pose_solve.json"))
     args = ap.parse_args(argv)
     supports = [s.strip() for s in args.supports.split(",") if s.strip()]
@@ -45,7 +47,7 @@ def main(argv=None) -> int:
     import numpy as np
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    ti.init(arch=getattr(ti, args.arch), log_level=ti.WARN)
     from taichi_hair.scene.file import load_scene
 
     rows = []
