@@ -23,7 +23,7 @@ def _accd(a0, a1, b0, b1, da0, da1, db0, db1, xi):
 
     @ti.kernel
     def run(thickness: float):
-        toi, capped = accd_edge_edge(pts[0], pts[1], pts[2], pts[3], pts[4], pts[5], pts[6], pts[7], thickness)
+        toi, capped = accd_edge_edge(pts[0], pts[1], pts[2], pts[3], pts[4], pts[5], pts[6], pts[7], thickness, 1.0)
         out[0] = toi
         out[1] = capped
 
@@ -52,15 +52,16 @@ def test_accd_time_of_impact_of_crossing_segments():
     assert toi > 1.0
 
 
-def test_continuous_detection_finds_every_closing_pair_a_brute_force_finds():
-    """Random moving edges: every pair whose sampled minimum distance over the step goes below the
-    thickness (and that is not a proximity contact) gets an impact, and no pair that stays well apart."""
+def _random_moving_edges(strands: int, seed: int):
+    """``strands`` free 3-edge strands in a 2 cm box (2 mm edges, r = 0.2 mm) moving up to ~1 cm in one step (per-strand
+    motions plus jitter), after the step's proximity detection and one continuous pass from x0 to x1.  Returns the
+    model, x0, the displacement, the pipeline, the proximity pairs (lower edge first) and the contacts added."""
     from taichi_hair.contact.pipeline import ContactPipeline
 
-    rng = np.random.default_rng(11)
+    rng = np.random.default_rng(seed)
     mat = RodMaterial(radius=2e-4)
     b = GroomBuilder()
-    for s in range(60):
+    for s in range(strands):
         p0 = rng.uniform(0, 0.02, 3)
         d = rng.normal(size=(3, 3))
         b.add_strand(p0 + np.cumsum(2e-3 * d / np.linalg.norm(d, axis=1, keepdims=True), axis=0), mat, root="free")
@@ -68,7 +69,6 @@ def test_continuous_detection_finds_every_closing_pair_a_brute_force_finds():
     st = model.state()
     x0 = st.positions().astype(np.float64)
     strand_of = model.host["vertex_strand"]
-    # Per-strand rigid-ish motions plus jitter: up to ~1 cm per step.
     disp = rng.normal(scale=4e-3, size=(model.strand_count, 3))[strand_of] + rng.normal(scale=5e-4, size=x0.shape)
     x1 = x0 + disp
     cfg = ContactConfig(margin=0.0, max_contacts_per_edge=6, continuous_detections=1)
@@ -82,6 +82,73 @@ def test_continuous_detection_finds_every_closing_pair_a_brute_force_finds():
     xf0.from_numpy(x0.astype(np.float32))
     xf1.from_numpy(x1.astype(np.float32))
     added = pipe.detect_continuous(xf0, xf1)
+    return model, x0, disp, pipe, prox, added, mat
+
+
+def test_each_edge_keeps_the_two_earliest_impacts_of_the_full_query():
+    """``find_impacts`` stops a pair's query once its time passes the latest time the edge's full list still
+    takes (``accd_edge_edge``'s t_max): the lists must still be the earliest ``impacts_per_edge`` impacts, by
+    (time, other edge), of the full query (t_max = 1) over the candidate pairs (swept boxes grown by the radii
+    overlapping; not adjacent; not a proximity contact).  150 random moving strands (420 edges): every edge's list
+    equals that selection from all pairs' full queries, the edges exactly, the times to 1e-6 of the step (f32; the
+    same function on the same inputs).  Not vacuous: edges with a full list, and pairs left out of them."""
+    from taichi_hair.contact.ccd import accd_edge_edge
+
+    model, x0, disp, pipe, prox, added, mat = _random_moving_edges(150, 5)
+    K = pipe.ccd.impacts_per_edge
+    strand_of = model.host["vertex_strand"]
+    edges = np.nonzero(model.host["edge_rest_length"] > 0)[0]
+    x1 = x0 + disp
+    lo = np.minimum(np.minimum(x0[edges], x0[edges + 1]), np.minimum(x1[edges], x1[edges + 1])) - mat.radius
+    hi = np.maximum(np.maximum(x0[edges], x0[edges + 1]), np.maximum(x1[edges], x1[edges + 1])) + mat.radius
+    ia, ib = np.triu_indices(len(edges), 1)
+    a, b = edges[ia], edges[ib]
+    keep = np.all((lo[ia] <= hi[ib]) & (lo[ib] <= hi[ia]), axis=1) & ~((strand_of[a] == strand_of[b]) & (b - a <= 1))
+    keep &= np.array([(int(p), int(q)) not in prox for p, q in zip(a, b)], bool)
+    a, b = a[keep], b[keep]
+    n = len(a)
+    x0f = ti.Vector.field(3, float, model.vertex_count)
+    x1f = ti.Vector.field(3, float, model.vertex_count)
+    x0f.from_numpy(x0.astype(np.float32))
+    x1f.from_numpy(x1.astype(np.float32))
+    pa = ti.field(ti.i32, n)
+    pb = ti.field(ti.i32, n)
+    pa.from_numpy(a.astype(np.int32))
+    pb.from_numpy(b.astype(np.int32))
+    toi = ti.field(float, n)
+
+    @ti.kernel
+    def full_queries(xi: float):
+        for k in range(n):
+            p, q = pa[k], pb[k]
+            t, _ = accd_edge_edge(x0f[p], x0f[p + 1], x0f[q], x0f[q + 1], x1f[p] - x0f[p], x1f[p + 1] - x0f[p + 1],
+                                  x1f[q] - x0f[q], x1f[q + 1] - x0f[q + 1], xi, 1.0)
+            toi[k] = t
+
+    full_queries(2 * mat.radius)
+    t = toi.to_numpy()
+    hit = t <= 1.0
+    count = pipe.ccd.edge_impact_count.to_numpy()
+    listed = pipe.ccd.edge_impact.to_numpy()
+    listed_t = pipe.ccd.edge_impact_time.to_numpy()
+    full = left_out = 0
+    for e in edges:
+        mine = [(float(t[k]), int(b[k] if a[k] == e else a[k])) for k in np.nonzero(hit & ((a == e) | (b == e)))[0]]
+        want = sorted(mine)[:K]
+        got = [(float(listed_t[e, k]), int(listed[e, k])) for k in range(count[e])]
+        assert [o for _, o in got] == [o for _, o in want], (e, got, want)
+        assert np.allclose([x for x, _ in got], [x for x, _ in want], atol=1e-6), (e, got, want)
+        full += count[e] == K
+        left_out += max(0, len(mine) - K)
+    assert full > 20 and left_out > 20, (full, left_out)
+
+
+def test_continuous_detection_finds_every_closing_pair_a_brute_force_finds():
+    """Random moving edges: every pair whose sampled minimum distance over the step goes below the
+    thickness (and that is not a proximity contact) gets an impact, and no pair that stays well apart."""
+    model, x0, disp, pipe, prox, added, mat = _random_moving_edges(60, 11)
+    strand_of = model.host["vertex_strand"]
+    n_prox = pipe.contact_count - added
     vtx = pipe.con.contact_vertex.to_numpy()[n_prox:n_prox + added]
     found = {tuple(sorted((v[0], v[2]))) for v in vtx}
     assert len(found) == added

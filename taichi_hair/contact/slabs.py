@@ -27,7 +27,10 @@ not along the axis) the pile put 24-34 % of the contacts in the rest and the run
 runs each, 2026-12-06).  Measured on the grooming benchmark's 8,600 guides (153k hair-hair contacts, 2
 cores, kernel profiler): 61 % of the contacts in the slabs' own groups, 28 % between neighbours, 11 % in the rest;
 a sweep 3.2 ms one by one in index order, 2.6 ms in slabs with the guides in index order (random in space), 1.9
-ms with the guides ordered (phase 1 at twice the serial rate).
+ms with the guides ordered (phase 1 at twice the serial rate).  From 0dcd407 to 2026-12-06 the grooming tool's
+slabs came out as descending runs (the axis's sign, see :func:`principal_axis_order`) and the pipeline did not use
+them; re-measured after the fix in one process (``benchmarks/probes/slab_sweeps.py``): a sweep 0.92-1.12x the
+time of the same contacts one by one, a still step 1.04-1.08x, within this VM's drift.
 """
 
 import numpy as np
