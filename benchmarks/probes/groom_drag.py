@@ -25,6 +25,21 @@ import time
 import numpy as np
 
 
+def benchmark_session(strands: int):
+    """(groom, session): ``benchmarks/bench_groom.py``'s groom (wavy strands x 14 vertices, 25 cm, on
+    ``assets/head.obj``, seed 0) in a GroomingSession with 10 % sag-free guides, hair-hair contacts and 10 iterations
+    per frame (``ti.init`` first; also used by ``slab_sweeps.py``)."""
+    from taichi_hair.cli.common import no_numpy_huge_pages
+    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
+    from taichi_hair.groom.session import GroomingConfig, GroomingSession
+
+    no_numpy_huge_pages()
+    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=strands, vertices_per_strand=14,
+                                                        length=0.25, seed=0))
+    return groom, GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True,
+                                                        autosave_every=0, rest_pose="sag-free"))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--stiffness", type=float, default=0.5)
@@ -40,15 +55,7 @@ def main(argv=None) -> int:
     import taichi as ti
 
     ti.init(arch=ti.cpu, default_fp=ti.f32, log_level=ti.ERROR)
-    from taichi_hair.cli.common import no_numpy_huge_pages
-    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
-    from taichi_hair.groom.session import GroomingConfig, GroomingSession
-
-    no_numpy_huge_pages()
-    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=args.strands, vertices_per_strand=14,
-                                                        length=0.25, seed=0))
-    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
-                                                    rest_pose="sag-free"))
+    _, session = benchmark_session(args.strands)
     session.advance(4)
     if args.correction_cap is not None:
         session._sim.solver.contacts.config.correction_max_iterations = args.correction_cap

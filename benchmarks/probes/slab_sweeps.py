@@ -38,16 +38,10 @@ def main(argv=None) -> int:
     import taichi as ti
 
     ti.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN)
-    from taichi_hair.cli.common import no_numpy_huge_pages
+    from groom_drag import benchmark_session  # (this folder: the grooming benchmark's groom and session)
     from taichi_hair.contact.projection import SEQUENTIAL, SLABS, projection_sweep
-    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
-    from taichi_hair.groom.session import GroomingConfig, GroomingSession
 
-    no_numpy_huge_pages()
-    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=a.strands, vertices_per_strand=14,
-                                                        length=0.25, seed=0))
-    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
-                                                    rest_pose="sag-free"))
+    _, session = benchmark_session(a.strands)
     session._ensure_built()
     sim = session._sim
     pipeline = sim.solver.contacts
