@@ -137,7 +137,8 @@ def replace_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.nda
     rest = rest_points.copy()
     if not new:
         return pts, rest
-    # One scatter of the concatenated poses (a copy per strand took 35 ms for 8,600 strands); the same values.
+    # One scatter of the concatenated poses instead of a copy per strand; the same values (8,600 of 86,000 strands x 14:
+    # 21 -> 19 ms, most of it the two copies of the whole groom).
     off = np.asarray(offsets, dtype=np.int64)
     ss = np.fromiter(new.keys(), dtype=np.int64, count=len(new))
     count = off[ss + 1] - off[ss]
