@@ -103,7 +103,7 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     mismatch = np.where(counts[gidx] != gcount)[0]
     if not mismatch.size:
-        gp = P[_vertex_rows(starts[gidx], gcount)]
+        gp = P[vertex_rows(starts[gidx], gcount)]
         far = np.any(np.abs(gp - X) > 1e-9, axis=1)
         mismatch = np.unique(np.repeat(np.arange(ng), gcount)[far])
     if mismatch.size:
@@ -187,8 +187,9 @@ def compute_binding(guide_model: Model, guide_indices, strands, neighbour_count:
     }
 
 
-def _vertex_rows(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """The vertex rows of strands starting at ``starts`` with ``counts`` vertices, one strand after another."""
+def vertex_rows(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The vertex rows of strands starting at ``starts`` with ``counts`` vertices, one strand after another, int64
+    (vectorised: no per-strand slices; the binding, the skinning's partial upload, the edits and the guides use it)."""
     return np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
 
 

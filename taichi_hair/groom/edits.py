@@ -149,7 +149,9 @@ def replace_strands(points: np.ndarray, rest_points: np.ndarray, offsets: np.nda
         k = int(bad[0])
         raise ValueError(f"replace_strands: strand {int(ss[k])} has {int(count[k])} vertices, its new poses "
                          f"{int(n_cur[k])} and {int(n_rest[k])}")
-    rows = np.repeat(off[ss] - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+    from .binding import vertex_rows
+
+    rows = vertex_rows(off[ss], count)
     pts[rows] = np.concatenate([np.asarray(v[0]).reshape(-1, 3) for v in new.values()]).astype(pts.dtype)
     rest[rows] = np.concatenate([np.asarray(v[1]).reshape(-1, 3) for v in new.values()]).astype(rest.dtype)
     return pts, rest

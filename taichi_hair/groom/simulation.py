@@ -104,8 +104,9 @@ def guide_setup(groom, config, guides: np.ndarray):
     off = g.strand_offsets
     counts = g.strand_vertex_counts()[guides]
     starts = off[guides]
-    # Vertex indices of the guides, strand after strand (vectorised: no per-strand slices).
-    rows = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum())
+    from .binding import vertex_rows
+
+    rows = vertex_rows(starts, counts)  # (the guides' vertices, strand after strand)
     points = g.rest_points[rows].astype(np.float64)
     offsets = np.concatenate([[0], np.cumsum(counts)])
     material = RodMaterial(radius=cfg.radius, density=cfg.density, youngs_modulus_bend=cfg.youngs_modulus,

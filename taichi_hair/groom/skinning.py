@@ -111,6 +111,19 @@ def frame_matrix(t: vec3, d1: vec3):
 
 
 # =========================================================================== kernels
+@ti.func
+def _upload_vertex(sk: ti.template(), v, rest: ti.template(), edge: ti.template(), param: ti.template(),
+                   local: ti.template()):
+    """Render vertex v's rest position and binding (edge, parameter, frame coordinates) into ``sk``, each value cast
+    to the field's type: the part of ``upload_binding`` that ``upload_binding_rows`` shares."""
+    K = ti.static(sk.render_vertex_bind_edge.shape[1])
+    sk.render_vertex_rest_position[v] = ti.Vector([rest[v, 0], rest[v, 1], rest[v, 2]], float)
+    for k in ti.static(range(K)):
+        sk.render_vertex_bind_edge[v, k] = ti.cast(edge[v, k], ti.i32)
+        sk.render_vertex_bind_param[v, k] = ti.cast(param[v, k], float)
+        sk.render_vertex_bind_local[v, k] = ti.Vector([local[v, k, 0], local[v, k, 1], local[v, k, 2]], float)
+
+
 @ti.kernel
 def upload_binding(sk: ti.template(), rest: ti.types.ndarray(dtype=ti.f64, ndim=2),
                    body: ti.types.ndarray(dtype=ti.i32, ndim=1), edge: ti.types.ndarray(dtype=ti.i64, ndim=2),
@@ -120,12 +133,9 @@ def upload_binding(sk: ti.template(), rest: ti.types.ndarray(dtype=ti.f64, ndim=
     each value cast to the field's type (round to nearest, as NumPy's ``astype``)."""
     K = ti.static(sk.render_vertex_bind_edge.shape[1])
     for v in sk.render_vertex_body:
-        sk.render_vertex_rest_position[v] = ti.Vector([rest[v, 0], rest[v, 1], rest[v, 2]], float)
+        _upload_vertex(sk, v, rest, edge, param, local)
         sk.render_vertex_body[v] = body[v]
         for k in ti.static(range(K)):
-            sk.render_vertex_bind_edge[v, k] = ti.cast(edge[v, k], ti.i32)
-            sk.render_vertex_bind_param[v, k] = ti.cast(param[v, k], float)
-            sk.render_vertex_bind_local[v, k] = ti.Vector([local[v, k, 0], local[v, k, 1], local[v, k, 2]], float)
             sk.render_vertex_bind_weight[v, k] = ti.cast(weight[v, k], float)
 
 
@@ -135,14 +145,8 @@ def upload_binding_rows(sk: ti.template(), rows: ti.types.ndarray(dtype=ti.i64, 
                         param: ti.types.ndarray(dtype=ti.f64, ndim=2), local: ti.types.ndarray(dtype=ti.f64, ndim=3)):
     """``upload_binding`` of the render vertices ``rows`` only, without the weights and bodies (a rebind keeps them):
     the same casts, so the fields equal a full upload of the same arrays."""
-    K = ti.static(sk.render_vertex_bind_edge.shape[1])
     for r in range(rows.shape[0]):
-        v = rows[r]
-        sk.render_vertex_rest_position[v] = ti.Vector([rest[v, 0], rest[v, 1], rest[v, 2]], float)
-        for k in ti.static(range(K)):
-            sk.render_vertex_bind_edge[v, k] = ti.cast(edge[v, k], ti.i32)
-            sk.render_vertex_bind_param[v, k] = ti.cast(param[v, k], float)
-            sk.render_vertex_bind_local[v, k] = ti.Vector([local[v, k, 0], local[v, k, 1], local[v, k, 2]], float)
+        _upload_vertex(sk, rows[r], rest, edge, param, local)
 
 
 @ti.kernel
@@ -278,9 +282,9 @@ class SkinningLBS:
         the grooming benchmark's edit of 8,600 strands: 22.5 -> 11.9 ms)."""
         self.host = h
         if strands is not None:
-            from .binding import _vertex_rows
+            from .binding import vertex_rows
 
-            rows = _vertex_rows(h["render_strand_vertex_start"][strands], h["render_strand_vertex_count"][strands])
+            rows = vertex_rows(h["render_strand_vertex_start"][strands], h["render_strand_vertex_count"][strands])
             if rows.size:
                 upload_binding_rows(self.fields, np.ascontiguousarray(rows, np.int64),
                                     np.ascontiguousarray(h["render_vertex_rest_position"], np.float64),
