@@ -146,7 +146,7 @@ def upload_binding_rows(sk: ti.template(), rows: ti.types.ndarray(dtype=ti.i64, 
     """``upload_binding`` of the render vertices ``rows`` only, without the weights and bodies (a rebind keeps them):
     the same casts, so the fields equal a full upload of the same arrays."""
     for r in range(rows.shape[0]):
-        _upload_vertex(sk, rows[r], rest, edge, param, local)
+        _upload_vertex(sk, ti.cast(rows[r], ti.i32), rest, edge, param, local)  # (an i32 index: no cast warning)
 
 
 @ti.kernel
