@@ -43,6 +43,7 @@ class Schedule(StrEnum):
     AUTO = "auto"
     STAGE = "stage"
     STRAND = "strand"
+    LANES = "lanes"
 
 
 class Twist(StrEnum):
@@ -522,7 +523,8 @@ class SolverADMMConfig:
             iterations in one kernel parallel over strands, each strand's
             stages serially (suits CPUs; bit-identical to ``"stage"`` on CPU),
             ``"auto"`` picks ``"strand"`` on CPU and ``"stage"`` on GPU archs
-            (and ``"stage"`` when ``tridiagonal="pcr"`` is asked for).
+            (and ``"stage"`` when ``tridiagonal="pcr"``); ``"lanes"`` (CPU, Korner) the
+            strand schedule on lanes of eight strands (:mod:`taichi_hair.lanes`).
         check_finite: after each step, check every state value for NaN/inf
             and raise :class:`SimulationDivergedError` naming the strand.
         contacts: :class:`ContactConfig` to enable frictional contacts
@@ -581,11 +583,9 @@ class SolverADMMConfig:
         self.strain_measure = as_choice(StrainMeasure, owner, "strain_measure", self.strain_measure)
         self.tridiagonal = as_choice(Tridiagonal, owner, "tridiagonal", self.tridiagonal)
         self.schedule = as_choice(Schedule, owner, "schedule", self.schedule)
-        if self.schedule == "strand" and self.tridiagonal == "pcr":
-            raise ValueError(
-                "SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule='strand' "
-                "(the strand schedule solves each strand with Thomas); use schedule='stage' or 'auto'"
-            )
+        if self.schedule in ("strand", "lanes") and self.tridiagonal == "pcr":
+            raise ValueError(f"SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule="
+                             f"'{self.schedule}' (it solves each strand with Thomas); use schedule='stage' or 'auto'")
         self.dual_frame = as_choice(DualFrame, owner, "dual_frame", self.dual_frame)
         _check_positive("SolverADMMConfig", "w0", self.w0)
         if self.anderson_window is not None and not (

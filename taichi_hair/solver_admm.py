@@ -49,17 +49,14 @@ With contacts the strand schedule runs one iteration per launch, the z-step
 between launches (it couples strands); y and z both depend on x only, so
 projecting before the local step of the same iteration is the same algorithm.
 
-Step 4 has two schedules (``SolverADMMConfig.schedule``): "stage" launches
-the kernels above once per iteration, each parallel over all vertices (GPU);
-"strand" runs the whole loop in one kernel, parallel over strands, all
-iterations of a strand serially (CPU; ``schedule_strand``).  Both call the
-same per-element functions and give bit-identical results on CPU.
-
+Step 4's schedules (``SolverADMMConfig.schedule``): "stage" launches the kernels above once per iteration,
+each parallel over all vertices (GPU); "strand" runs the loop in one kernel, parallel over strands, all
+iterations of a strand serially (CPU; ``schedule_strand``; bit-identical to "stage" on CPU); "lanes" runs
+the strand schedule's arithmetic on lanes of eight strands (CPU SIMD; ``lanes``; equal to rounding).
 The step allocates nothing: all buffers are created in ``__init__``.
 """
 
 from __future__ import annotations
-
 
 import numpy as np
 import taichi as ti
@@ -72,6 +69,7 @@ from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_l
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
+from .lanes import LaneLayout, admm_iterations_lanes
 from .schedule_strand import admm_iterations_strand
 from .state import Control, State
 from .strains import BERGOU, KORNER
@@ -131,18 +129,16 @@ class SolverADMM(SolverBase):
         schedule = cfg.schedule
         if schedule == Schedule.AUTO:
             schedule = Schedule.STAGE if gpu or cfg.tridiagonal == Tridiagonal.PCR else Schedule.STRAND
-        elif schedule == Schedule.STRAND and cfg.tridiagonal == Tridiagonal.PCR:
-            raise ValueError(
-                "SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule='strand' "
-                "(the strand schedule solves each strand with Thomas)")
-        #: Resolved schedule: "stage" or "strand".
+        elif schedule != Schedule.STAGE and cfg.tridiagonal == Tridiagonal.PCR:
+            raise ValueError(f"SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule="
+                             f"'{schedule}' (it solves each strand with Thomas)")
+        if schedule == Schedule.LANES and (gpu or self.measure != KORNER):
+            raise ValueError("SolverADMMConfig.schedule='lanes' needs Taichi's CPU arch and strain_measure='korner'")
+        #: Resolved schedule: "stage", "strand" or "lanes" (``lanes.LaneLayout`` in ``self._lanes``).
         self.schedule = schedule
-        method = cfg.tridiagonal
-        if schedule == Schedule.STRAND:
-            method = "thomas"
-        elif method == "auto":
-            method = "pcr" if gpu else "thomas"
-        self.tridiagonal_method = method
+        self._lanes = LaneLayout(h["strand_vertex_count"]) if schedule == Schedule.LANES else None
+        method = ("pcr" if gpu else "thomas") if cfg.tridiagonal == "auto" else cfg.tridiagonal
+        self.tridiagonal_method = method = "thomas" if schedule != Schedule.STAGE else method
         self.tridiag = TridiagonalSolver(model.strand_vertex_start, model.strand_vertex_count, model.vertex_strand,
                                          h["strand_vertex_count"], method)
         #: Contacts (Sec. 4.5): hair-hair when config.contacts is set, bodies when colliders are given.
@@ -272,12 +268,10 @@ class SolverADMM(SolverBase):
         Args:
             state: positions, velocities, twists and frames at the beginning of the step.
             control: body transforms at the *end* of the step, gravity and air velocity.
-            dt: time step [s]; in the quasistatic mode it only scales nothing and may be any
-                positive number.
+            dt: time step [s]; in the quasistatic mode it scales nothing and may be any positive number.
 
         Raises:
-            SimulationDivergedError: if any value becomes non-finite; ``state`` is then
-                restored to the beginning of the step.
+            SimulationDivergedError: if any value becomes non-finite; ``state`` is then restored to the step's beginning.
         """
         self._check_dt(dt)
         m, b, cfg = self.model, self.buf, self.config
@@ -315,15 +309,21 @@ class SolverADMM(SolverBase):
         self._update_frames(state, control)
         t0 = self._tock("frames", t0)
 
-        if self.schedule == Schedule.STRAND and con is None:
+        if self._lanes is not None and con is None and not self._anderson_on():
+            # (a-g) for every iteration in one kernel, groups of eight strands in parallel (lanes.schedule).
+            admm_iterations_lanes(self.use_q, dyn, self.twist_free, self._lanes, m, control.body_rotation,
+                                  state.vertex_position, state.edge_twist, state, b, g, v_air, cfg.air_viscosity, h,
+                                  damping_scale, cfg.iterations, weight_floor)
+        elif self.schedule != Schedule.STAGE and con is None:
             # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
             admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
                                    control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
                                    v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations, weight_floor,
                                    self.anderson, self.anderson.window, int(self._anderson_on()))
+        if self.schedule != Schedule.STAGE and con is None:
             t0 = self._tock("iterations", t0)
             self.iteration_count += cfg.iterations
-        elif self.schedule == Schedule.STRAND:
+        elif self.schedule != Schedule.STAGE:
             ccd_at = self._continuous_iterations()
             for it in range(cfg.iterations):
                 if it in ccd_at:
