@@ -53,7 +53,7 @@ def main(argv=None):
     p.add_argument("--contacts", choices=["on", "off"], default="on")
     p.add_argument("--frames", type=int, default=5, help="measured frames (after 2 warm-up frames)")
     p.add_argument("--size", type=int, nargs=2, default=(960, 720))
-    p.add_argument("--schedule", default="auto", choices=["auto", "stage", "strand"],
+    p.add_argument("--schedule", default="auto", choices=["auto", "stage", "strand", "lanes"],
                    help="the guides' ADMM launch schedule (GroomingConfig.schedule)")
     p.add_argument("--no-draw", action="store_true", help="skip the GGUI drawing (no Vulkan device)")
     p.add_argument("--rest-pose", choices=["authored", "sag-free"], default="authored",

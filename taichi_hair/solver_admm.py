@@ -69,7 +69,7 @@ from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_l
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
-from .lanes import LaneLayout, admm_iterations_lanes
+from .lanes import CONTACT_ITERATION, WHOLE_STEP, LaneLayout, admm_iterations_lanes, lanes_gather, lanes_scatter
 from .schedule_strand import admm_iterations_strand
 from .state import Control, State
 from .strains import BERGOU, KORNER
@@ -136,7 +136,7 @@ class SolverADMM(SolverBase):
             raise ValueError("SolverADMMConfig.schedule='lanes' needs Taichi's CPU arch and strain_measure='korner'")
         #: Resolved schedule: "stage", "strand" or "lanes" (``lanes.LaneLayout`` in ``self._lanes``).
         self.schedule = schedule
-        self._lanes = LaneLayout(h["strand_vertex_count"]) if schedule == Schedule.LANES else None
+        self._lanes = LaneLayout(h["strand_vertex_start"], h["strand_vertex_count"]) if schedule == Schedule.LANES else None
         method = ("pcr" if gpu else "thomas") if cfg.tridiagonal == "auto" else cfg.tridiagonal
         self.tridiagonal_method = method = "thomas" if schedule != Schedule.STAGE else method
         self.tridiag = TridiagonalSolver(model.strand_vertex_start, model.strand_vertex_count, model.vertex_strand,
@@ -274,8 +274,7 @@ class SolverADMM(SolverBase):
             SimulationDivergedError: if any value becomes non-finite; ``state`` is then restored to the step's beginning.
         """
         self._check_dt(dt)
-        m, b, cfg = self.model, self.buf, self.config
-        dyn = self.dynamic
+        m, b, cfg, dyn = self.model, self.buf, self.config, self.dynamic
         bdf2_run = dyn and cfg.integrator == Integrator.BDF2
         # BDF2 needs the last step's state at the same dt; otherwise a backward Euler step.
         bdf2 = bdf2_run and self._history_dt == dt
@@ -285,11 +284,8 @@ class SolverADMM(SolverBase):
         # W_y >= inertia_floor m / h^2 (dynamic mode): the same scalar for the local and the global step.
         weight_floor = cfg.inertia_floor / (h * h) if dyn else 0.0
         self._weight_floor = weight_floor
-        g = ti.math.vec3(*control.gravity)
-        v_air = ti.math.vec3(*control.air_velocity)
-
-        t0 = self._tick()
-        con = self.contacts
+        g, v_air = ti.math.vec3(*control.gravity), ti.math.vec3(*control.air_velocity)
+        t0, con = self._tick(), self.contacts
         if con is not None:
             # Proximity detection on x^t (Alg. 1 l.1); clear last step's collision weights first.
             con.clear(b)
@@ -309,38 +305,10 @@ class SolverADMM(SolverBase):
         self._update_frames(state, control)
         t0 = self._tock("frames", t0)
 
-        if self._lanes is not None and con is None and not self._anderson_on():
-            # (a-g) for every iteration in one kernel, groups of eight strands in parallel (lanes.schedule).
-            admm_iterations_lanes(self.use_q, dyn, self.twist_free, self._lanes, m, control.body_rotation,
-                                  state.vertex_position, state.edge_twist, state, b, g, v_air, cfg.air_viscosity, h,
-                                  damping_scale, cfg.iterations, weight_floor)
-        elif self.schedule != Schedule.STAGE and con is None:
-            # (a-g) for every iteration in one kernel, strands in parallel (schedule_strand).
-            admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
-                                   control.body_rotation, state.vertex_position, state.edge_twist, state, b, g,
-                                   v_air, cfg.air_viscosity, h, damping_scale, cfg.iterations, weight_floor,
-                                   self.anderson, self.anderson.window, int(self._anderson_on()))
-        if self.schedule != Schedule.STAGE and con is None:
-            t0 = self._tock("iterations", t0)
-            self.iteration_count += cfg.iterations
-        elif self.schedule != Schedule.STAGE:
-            ccd_at = self._continuous_iterations()
-            for it in range(cfg.iterations):
-                if it in ccd_at:
-                    # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
-                    con.detect_continuous(b.vertex_position_begin, state.vertex_position)
-                    t0 = self._tock("continuous", t0)
-                # (b, c) z-step and lambda_z update, then (a, c-g) one iteration strand by strand.
-                con.project(state.vertex_position, b, con.config.projection_iterations)
-                t0 = self._tock("projection", t0)
-                admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, dyn, self.twist_free, m,
-                                       control.body_rotation, state.vertex_position, state.edge_twist, state, b,
-                                       g, v_air, cfg.air_viscosity, h, damping_scale, 1, weight_floor,
-                                       self.anderson, self.anderson.window, 0)  # window 0: not with contacts
-                t0 = self._tock("iterations", t0)
-                self.iteration_count += 1
-        else:
+        if self.schedule == Schedule.STAGE:
             t0 = self._iterations_stage(state, control, h, g, v_air, damping_scale, t0)
+        else:
+            t0 = self._iterations_fused(state, control, h, g, v_air, damping_scale, weight_floor, t0)
 
         if con is not None:
             con.count_status(state.vertex_position)
@@ -372,17 +340,54 @@ class SolverADMM(SolverBase):
         n = self.model.vertex_count
         return np.zeros(n, np.int8) if self.contacts is None else self.contacts.vertex_states(n)
 
+    def _iterations_fused(self, state: State, control: Control, h: float, g, v_air, damping_scale: float,
+                          weight_floor: float, t0: float) -> float:
+        """Step 4 of Algorithm 1, "strand" or "lanes" schedule: without contacts every iteration in one launch
+        (``schedule_strand``, or ``lanes`` when no Anderson mixing), with contacts one launch per iteration and the
+        z-step between them (it couples strands; the lanes are gathered once per step, and only x goes back between)."""
+        m, b, cfg, con, lanes = self.model, self.buf, self.config, self.contacts, self._lanes
+        x, theta = state.vertex_position, state.edge_twist
+
+        def launch(iterations: int, mode: int) -> None:
+            if lanes is not None and not self._anderson_on():
+                admm_iterations_lanes(self.use_q, self.dynamic, self.twist_free, lanes, m, control.body_rotation, x, theta,
+                                      state, b, g, v_air, cfg.air_viscosity, h, damping_scale, iterations, weight_floor, mode)
+            else:
+                admm_iterations_strand(self.measure, self.use_q, self.with_ref_twist, self.dynamic, self.twist_free, m,
+                                       control.body_rotation, x, theta, state, b, g, v_air, cfg.air_viscosity, h,
+                                       damping_scale, iterations, weight_floor, self.anderson, self.anderson.window,
+                                       int(self._anderson_on()))  # (window 0 with contacts: no Anderson there)
+
+        if con is None:
+            launch(cfg.iterations, WHOLE_STEP)  # (a-g) for every iteration in one kernel
+            self.iteration_count += cfg.iterations
+            return self._tock("iterations", t0)
+        if lanes is not None:
+            lanes_gather(lanes, m, control.body_rotation, x, theta, state, b, damping_scale, weight_floor)
+        ccd_at = self._continuous_iterations()
+        for it in range(cfg.iterations):
+            if it in ccd_at:
+                # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
+                con.detect_continuous(b.vertex_position_begin, x)
+                t0 = self._tock("continuous", t0)
+            # (b, c) z-step and lambda_z update, then (a, c-g) one iteration strand by strand.
+            con.project(x, b, con.config.projection_iterations)
+            t0 = self._tock("projection", t0)
+            launch(1, CONTACT_ITERATION)
+            t0 = self._tock("iterations", t0)
+            self.iteration_count += 1
+        if lanes is not None:
+            lanes_scatter(lanes, x, theta, state, b)
+        return t0
+
     def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
                           t0: float) -> float:
         """Step 4 of Algorithm 1, "stage" schedule: a few kernels per iteration, each over all vertices.
 
         ``dt`` is the integrator's inertia step h (dt, or 2 dt / 3 for a BDF2 step)."""
-        m, b, cfg = self.model, self.buf, self.config
-        dyn = self.dynamic
-        con = self.contacts
+        m, b, cfg, dyn, con, aa, aa_on = (self.model, self.buf, self.config, self.dynamic, self.contacts, self.anderson,
+                                          self._anderson_on())
         ccd_at = self._continuous_iterations()
-        aa = self.anderson
-        aa_on = self._anderson_on()
         if aa_on:
             anderson_begin(m.strand, m.edge, state.vertex_position, state.edge_twist, b, aa)
         for it in range(cfg.iterations):
@@ -392,8 +397,7 @@ class SolverADMM(SolverBase):
                 t0 = self._tock("continuous", t0)
             # (a) Local elasticity solve over y (Sec. 4.4).
             solve_local_elasticity(self.measure, self.use_q, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
-                                   state.vertex_position, state.edge_twist, state, b, damping_scale,
-                                   self._weight_floor)
+                                   state.vertex_position, state.edge_twist, state, b, damping_scale, self._weight_floor)
             t0 = self._tock("local", t0)
             # (b) Feasible projection over z (Sec. 4.5) and lambda_z += z - x.
             if self.contacts is not None:
@@ -402,14 +406,12 @@ class SolverADMM(SolverBase):
             # (c) The dual update lambda_y += y - Bx is fused into the local step.
             # (d, e) Global tridiagonal solve over x (Sec. 4.3), then frames.
             admm.assemble_position_system(dyn, m.vertex, m.edge, m.pair, state.vertex_position, b, g, v_air,
-                                          cfg.air_viscosity, dt,
-                                          self._weight_floor)
+                                          cfg.air_viscosity, dt, self._weight_floor)
             self.tridiag.solve(b.tri_lower, b.tri_diag, b.tri_upper, b.tri_rhs3)
             admm.apply_position_update(m.vertex, state.vertex_position, b)
             t0 = self._tock("global", t0)
             update_reference_frames(self.with_ref_twist, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
-                                    state.vertex_position,
-                                    state.edge_twist, state)
+                                    state.vertex_position, state.edge_twist, state)
             t0 = self._tock("frames", t0)
             if self.twist_free:
                 # (f, g) replaced by the twist of a naturally straight round rod: none (frames.twist_choice).
@@ -423,8 +425,7 @@ class SolverADMM(SolverBase):
                 update_material_frames(m.edge, state.edge_twist, state, b.tri_rhs1)  # theta += dtheta, then frames
             t0 = self._tock("frames", t0)
             if aa_on:
-                # Anderson mixing of u = (x, lambda_y, theta), strand by strand, then the frames of the mix
-                # (anderson.py).
+                # Anderson mixing of u = (x, lambda_y, theta), strand by strand, then the frames of the mix (anderson.py).
                 anderson_mix(m.strand, m.vertex, m.edge, state.vertex_position, state.edge_twist, b, aa, aa.window,
                              int(it == cfg.iterations - 1))
                 self._update_frames(state, control)
@@ -433,12 +434,11 @@ class SolverADMM(SolverBase):
         return t0
 
     def _update_frames(self, state: State, control: Control) -> None:
-        """Reference (and material) frames after x changed outside the iterations; the twist-free
-        frames too when the twist unknowns are dropped."""
+        """Reference (and material) frames after x changed outside the iterations; the twist-free frames too when the
+        twist unknowns are dropped."""
         m = self.model
         update_reference_frames(self.with_ref_twist, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
-                                state.vertex_position,
-                                state.edge_twist, state)
+                                state.vertex_position, state.edge_twist, state)
         if self.twist_free:
             update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, False)
 
@@ -450,8 +450,7 @@ class SolverADMM(SolverBase):
                        if self.config.integrator == Integrator.BDF2 else "dynamic (backward Euler)")
         con = self.contacts
         if con is None:
-            rep["contacts"] = "no contacts"
-            return rep
+            return {**rep, "contacts": "no contacts"}
         cfg = con.config
         if cfg.hair_hair:
             rep["hair_hair_search"] = (

@@ -82,7 +82,8 @@ class GroomingConfig:
             shape, the groom comes to rest and the correction stops after 15 sweeps: 1,003 against 496 ms of simulation
             per frame (``bench_groom.py --rest-pose sag-free --unheld-shape-weight 0|10``, commit 1de4086).
         schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (strand on CPU, stage on GPU),
-            ``"stage"`` or ``"strand"`` (SolverADMMConfig.schedule: same results, other speed).
+            ``"stage"``, ``"strand"`` or ``"lanes"`` (SolverADMMConfig.schedule: the same results, to rounding for
+            ``"lanes"``; other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
         undo_limit: most undo snapshots kept [-].
     """
@@ -136,8 +137,8 @@ class GroomingConfig:
         if not isinstance(self.contacts, (bool, np.bool_)):
             raise ValueError(f"GroomingConfig.contacts must be true or false, got {self.contacts!r}")
         self.contacts = bool(self.contacts)
-        if self.schedule not in ("auto", "stage", "strand"):
-            raise ValueError(f"GroomingConfig.schedule must be 'auto', 'stage' or 'strand', got {self.schedule!r}")
+        if self.schedule not in ("auto", "stage", "strand", "lanes"):
+            raise ValueError(f"GroomingConfig.schedule must be 'auto', 'stage', 'strand' or 'lanes', got {self.schedule!r}")
         if self.rest_pose not in ("authored", "sag-free"):
             raise ValueError(f"GroomingConfig.rest_pose must be 'authored' or 'sag-free', got {self.rest_pose!r}")
 

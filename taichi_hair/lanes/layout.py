@@ -107,8 +107,9 @@ class LaneLayout:
     Fields are allocated once, here (``SolverADMM`` builds it at its construction when the schedule is "lanes").
     """
 
-    def __init__(self, strand_vertex_count: np.ndarray):
+    def __init__(self, strand_vertex_start: np.ndarray, strand_vertex_count: np.ndarray):
         counts = np.asarray(strand_vertex_count, np.int64)
+        starts = np.asarray(strand_vertex_start, np.int64)
         groups = []
         for m in np.unique(counts):
             members = np.flatnonzero(counts == m)  # in index order: neighbouring strands share a group
@@ -135,6 +136,8 @@ class LaneLayout:
         self.group_vertex_count = ti.field(ti.i32, G1)
         #: Strand of each lane [-], shape (G,) of I8.
         self.group_strand = ti.field(I8, G1)
+        #: First vertex of each lane's strand [-], shape (G,) of I8.
+        self.group_vertex_start = ti.field(I8, G1)
         #: 1 for the lanes whose results are scattered back, 0 for padding [-], shape (G,) of I8.
         self.group_lane_real = ti.field(I8, G1)
         #: Strand-damping coefficient c = tau * damping_scale of each lane [-], shape (G,) of V8.
@@ -163,8 +166,10 @@ class LaneLayout:
         self.lane_velocity_origin = ti.field(V8, (R, 3))  #: vertex_velocity_origin [m/s]
         self.lane_twist_origin = ti.field(V8, R)          #: edge_twist_origin [rad]
         self.lane_omega_origin = ti.field(V8, R)          #: edge_angular_velocity_origin [rad/s]
-        self.lane_extra_weight = ti.field(V8, R)          #: vertex_contact_weight + vertex_attach_weight [N/m]
-        self.lane_extra_force = ti.field(V8, (R, 3))      #: w_z target_z + w_a target_a [N]
+        self.lane_contact_weight = ti.field(V8, R)        #: vertex_contact_weight W_z [N/m]
+        self.lane_contact_target = ti.field(V8, (R, 3))   #: vertex_contact_target [m]
+        self.lane_attach_weight = ti.field(V8, R)         #: vertex_attach_weight [N/m]
+        self.lane_attach_target = ti.field(V8, (R, 3))    #: vertex_attach_target [m]
         # --- per lane row: state and working values
         self.lane_position = ti.field(V8, (R, 3))         #: x [m]
         self.lane_twist = ti.field(V8, R)                 #: theta [rad]
@@ -183,7 +188,9 @@ class LaneLayout:
         if G:
             self.group_row_start.from_numpy(row_start.astype(np.int32))
             self.group_vertex_count.from_numpy(np.array([m for m, _, _ in groups], np.int32))
-            self.group_strand.from_numpy(np.stack([c for _, c, _ in groups]).astype(np.int32))
+            lanes = np.stack([c for _, c, _ in groups])
+            self.group_strand.from_numpy(lanes.astype(np.int32))
+            self.group_vertex_start.from_numpy(starts[lanes].astype(np.int32))
             real = np.zeros((G, LANES), np.int32)
             for g, (_, _, r) in enumerate(groups):
                 real[g, :r] = 1
@@ -210,7 +217,7 @@ def v8c(f: ti.template(), idx, c: ti.template()):
 def gather(L: ti.template(), g, model: ti.template(), body_rotation: ti.template(), x: ti.template(),
             theta: ti.template(), es: ti.template(), buf: ti.template(), damping_scale: float, weight_floor: float):
     strands = L.group_strand[g]
-    base = I8([model.strand_vertex_start[strands[q]] for q in ti.static(range(LANES))])
+    base = L.group_vertex_start[g]
     L.group_damping[g] = V8([model.strand_damping_time[strands[q]] for q in ti.static(range(LANES))]) * damping_scale
     has = I8(0)
     for q in ti.static(range(LANES)):
@@ -242,9 +249,6 @@ def gather(L: ti.template(), g, model: ti.template(), body_rotation: ti.template
         L.lane_stretch_stiffness[r] = v8(buf.edge_pair_stretch_stiffness, i)
         L.lane_twist_origin[r] = v8(buf.edge_twist_origin, i)
         L.lane_omega_origin[r] = v8(buf.edge_angular_velocity_origin, i)
-        wz = v8(buf.vertex_contact_weight, i)
-        wa = v8(buf.vertex_attach_weight, i)
-        L.lane_extra_weight[r] = wz + wa
         L.lane_twist[r] = v8(theta, i)
         for c in ti.static(range(3)):
             L.lane_bend_stiffness[r, c] = v8c(buf.pair_bend_stiffness, i, c)
@@ -252,7 +256,6 @@ def gather(L: ti.template(), g, model: ti.template(), body_rotation: ti.template
             L.lane_kappa_begin[r, c] = v8c(buf.pair_kappa_begin, i, c)
             L.lane_position_origin[r, c] = v8c(buf.vertex_position_origin, i, c)
             L.lane_velocity_origin[r, c] = v8c(buf.vertex_velocity_origin, i, c)
-            L.lane_extra_force[r, c] = wz * v8c(buf.vertex_contact_target, i, c) + wa * v8c(buf.vertex_attach_target, i, c)
             L.lane_position[r, c] = v8c(x, i, c)
             L.lane_tangent[r, c] = v8c(es.edge_tangent, i, c)
             L.lane_reference[r, c] = v8c(es.edge_reference_director, i, c)
@@ -261,19 +264,47 @@ def gather(L: ti.template(), g, model: ti.template(), body_rotation: ti.template
         for c in ti.static(range(6)):
             L.lane_dual[r, c] = v8c(buf.pair_dual, i, c)
             L.lane_force[r, c] = v8c(buf.pair_force, i, c)
+    gather_targets(L, g, buf)
 
 
 @ti.func
-def scatter(L: ti.template(), g, model: ti.template(), x: ti.template(), theta: ti.template(), es: ti.template(),
-             buf: ti.template()):
-    strands = L.group_strand[g]
+def gather_targets(L: ti.template(), g, buf: ti.template()):
+    """The collision and attachment weights and targets of group g (the z-step sets them between iterations)."""
+    base = L.group_vertex_start[g]
+    r0 = L.group_row_start[g]
+    for k in range(L.group_vertex_count[g]):
+        r = r0 + k
+        i = base + k
+        L.lane_contact_weight[r] = v8(buf.vertex_contact_weight, i)
+        L.lane_attach_weight[r] = v8(buf.vertex_attach_weight, i)
+        for c in ti.static(range(3)):
+            L.lane_contact_target[r, c] = v8c(buf.vertex_contact_target, i, c)
+            L.lane_attach_target[r, c] = v8c(buf.vertex_attach_target, i, c)
+
+
+@ti.func
+def scatter_positions(L: ti.template(), g, x: ti.template()):
+    """x of group g's real lanes back to the strands' layout (for the z-step between iterations)."""
     real = L.group_lane_real[g]
     r0 = L.group_row_start[g]
     for k in range(L.group_vertex_count[g]):
         r = r0 + k
         for q in ti.static(range(LANES)):
             if real[q] != 0:
-                i = model.strand_vertex_start[strands[q]] + k
+                x[L.group_vertex_start[g][q] + k] = vec3(L.lane_position[r, 0][q], L.lane_position[r, 1][q],
+                                                         L.lane_position[r, 2][q])
+
+
+@ti.func
+def scatter(L: ti.template(), g, x: ti.template(), theta: ti.template(), es: ti.template(),
+            buf: ti.template()):
+    real = L.group_lane_real[g]
+    r0 = L.group_row_start[g]
+    for k in range(L.group_vertex_count[g]):
+        r = r0 + k
+        for q in ti.static(range(LANES)):
+            if real[q] != 0:
+                i = L.group_vertex_start[g][q] + k
                 x[i] = vec3(L.lane_position[r, 0][q], L.lane_position[r, 1][q], L.lane_position[r, 2][q])
                 theta[i] = L.lane_twist[r][q]
                 es.edge_tangent[i] = vec3(L.lane_tangent[r, 0][q], L.lane_tangent[r, 1][q], L.lane_tangent[r, 2][q])

@@ -29,10 +29,14 @@ same bits from run to run (each lane's arithmetic does not depend on the others'
 import taichi as ti
 
 from ..elasticity import FRAME_PAIR, FRAME_ROOT
-from .layout import (V8, cross, dot, gather, load3, material_frame, matvec, matvec_t, normalized,
-                     parallel_transport, scale, scatter, select3, store3, sub)
+from .layout import (V8, cross, dot, gather, gather_targets, load3, material_frame, matvec, matvec_t, normalized,
+                     parallel_transport, scale, scatter, scatter_positions, select3, store3, sub)
 
 vec3 = ti.math.vec3
+
+#: ``admm_iterations_lanes``'s launches: a whole step without contacts, or one iteration of a step with contacts.
+WHOLE_STEP = 0
+CONTACT_ITERATION = 1
 
 
 # =========================================================================== the stages on lanes
@@ -220,10 +224,15 @@ def _assemble_position(L: ti.template(), dynamic: ti.template(), r, k, m, gravit
         f[c] = f[c] + (L.lane_force[r, c] - L.lane_force[r, c + 3])
         f[c] = f[c] + ti.select(has_prev, L.lane_force[rp, c + 3], 0.0)
         f[c] = f[c] - ti.select(real_edge, L.lane_force[rn, c], 0.0)
-    w_x = L.lane_extra_weight[r]
-    diag += w_x
+    # Collision constraint (W_z (z + lambda_z - x)) and attachment (k (target - x)), zero without them.
+    w_z = L.lane_contact_weight[r]
+    diag += w_z
     for c in ti.static(range(3)):
-        f[c] = f[c] + (L.lane_extra_force[r, c] - w_x * x[c])
+        f[c] = f[c] + w_z * (L.lane_contact_target[r, c] - x[c])
+    w_a = L.lane_attach_weight[r]
+    diag += w_a
+    for c in ti.static(range(3)):
+        f[c] = f[c] + w_a * (L.lane_attach_target[r, c] - x[c])
     L.lane_lower[r] = ti.select(fixed, 0.0, lower)
     L.lane_diag[r] = ti.select(fixed, 1.0, diag)
     L.lane_upper[r] = ti.select(fixed, 0.0, upper)
@@ -388,12 +397,21 @@ def admm_iterations_lanes(
     damping_scale: float,
     iterations: ti.i32,
     weight_floor: float,
+    launch: ti.template(),
 ):
     """``iterations`` ADMM iterations (Algorithm 1, lines 4a-4g) for every group of eight strands, groups in parallel:
     the strand schedule's kernel (``schedule_strand.admm_iterations_strand``) on lanes, Korner measure, no Anderson
-    mixing.  The frames must be up to date on entry, as there."""
+    mixing.  The frames must be up to date on entry, as there.
+
+    ``launch`` (compile-time): ``WHOLE_STEP`` gathers everything, runs the iterations and scatters everything back (a
+    step without contacts: one launch); ``CONTACT_ITERATION`` takes the lanes as :func:`lanes_gather` or the previous
+    launch left them, gathers only the z-step's weights and targets, and scatters only x (a step with contacts: the
+    z-step runs between single iterations; :func:`lanes_scatter` after the last)."""
     for g in L.group_vertex_count:
-        gather(L, g, model, body_rotation, x, theta, es, buf, damping_scale, weight_floor)
+        if ti.static(launch == WHOLE_STEP):
+            gather(L, g, model, body_rotation, x, theta, es, buf, damping_scale, weight_floor)
+        else:
+            gather_targets(L, g, buf)
         r0 = L.group_row_start[g]
         m = L.group_vertex_count[g]
         for _it in range(iterations):
@@ -433,4 +451,22 @@ def admm_iterations_lanes(
                     real = L.lane_rest_length[r] > 0.0
                     store3(L.lane_d1, r, select3(real, m1, load3(L.lane_d1, r)))
                     store3(L.lane_d2, r, select3(real, m2, load3(L.lane_d2, r)))
-        scatter(L, g, model, x, theta, es, buf)
+        if ti.static(launch == WHOLE_STEP):
+            scatter(L, g, x, theta, es, buf)
+        else:
+            scatter_positions(L, g, x)
+
+
+@ti.kernel
+def lanes_gather(L: ti.template(), model: ti.template(), body_rotation: ti.template(), x: ti.template(),
+                 theta: ti.template(), es: ti.template(), buf: ti.template(), damping_scale: float, weight_floor: float):
+    """Every group's constants and state into the lanes (the beginning of a step with contacts)."""
+    for g in L.group_vertex_count:
+        gather(L, g, model, body_rotation, x, theta, es, buf, damping_scale, weight_floor)
+
+
+@ti.kernel
+def lanes_scatter(L: ti.template(), x: ti.template(), theta: ti.template(), es: ti.template(), buf: ti.template()):
+    """Every group's state back to the strands' layout (after the last iteration of a step with contacts)."""
+    for g in L.group_vertex_count:
+        scatter(L, g, x, theta, es, buf)
