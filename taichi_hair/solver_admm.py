@@ -444,7 +444,8 @@ class SolverADMM(SolverBase):
 
     def model_report(self) -> dict:
         """What the solver modelled and skipped so far, in words, by topic (README, "Model no more than a scene needs")."""
-        rep = dict(self.model_choices)
+        rep = dict(self.model_choices, schedule=f"{self.schedule}" + (" (the strand kernel where Anderson mixing runs)"
+                                                                          if self._lanes is not None else ""))
         rep["mode"] = ("quasistatic: inertia and damping dropped" if not self.dynamic
                        else "dynamic (BDF2, backward Euler on steps without history)"
                        if self.config.integrator == Integrator.BDF2 else "dynamic (backward Euler)")

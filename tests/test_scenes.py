@@ -194,6 +194,10 @@ def test_shape_and_xpbd_solver_tables(tmp_path):
     assert type(s.colliders[0]).__name__ == "PlaneCollider" and not hasattr(s.solver_config, "colliders")
     with pytest.raises(SceneError, match=r"\[solver.region\].*ShapeRegion.damping"):
         load_scene(write(tmp_path, groom + '[solver]\ntype = "shape"\n[solver.region]\ndamping = 2.0\n'))
+    # ``simulate --schedule`` (an ADMM launch schedule) is refused for another solver, and set for ADMM.
+    with pytest.raises(SceneError, match=r'--schedule applies to type = "admm", not \'shape\''):
+        load_scene(write(tmp_path, groom + '[solver]\ntype = "shape"\n'), {"schedule": "lanes"})
+    assert load_scene(write(tmp_path, groom), {"schedule": "lanes"}).solver_config.schedule == "lanes"
     s = load_scene(write(tmp_path, groom + '[solver]\ntype = "xpbd"\nsubsteps = 30\n'), {"iterations": 2})
     assert isinstance(s.solver_config, SolverXPBDConfig) and s.solver_config.substeps == 30
     assert s.solver_config.iterations == 2

@@ -322,8 +322,8 @@ def load_scene(path, overrides: dict | None = None, sets: dict | None = None) ->
         path: the ``.toml`` file.
         overrides: command-line values that replace the file's: ``frames``, ``fps``, ``substeps``,
             ``strands`` (generator count, or the strands kept from a file), ``length``, ``seed`` and
-            ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``integrator`` (admm), ``continuous`` (admm
-            contact detections), ``rest_pose`` ([groom] rest_pose).
+            ``vertices_per_strand`` (generators only), ``iterations`` (solver), ``integrator`` and ``schedule``
+            (admm), ``continuous`` (admm contact detections), ``rest_pose`` ([groom] rest_pose).
         sets: any scene-file key by its dotted name (``{"solver.contacts.friction": 0.3}``;
             :func:`apply_sets`), applied to the file's tables before validation (``simulate --set``, batches).
 

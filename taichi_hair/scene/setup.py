@@ -332,6 +332,10 @@ def solver_from_table(t: Table, overrides: dict, colliders: list):
         if kind != "admm":
             t.fail(f"--integrator applies to type = \"admm\", not {kind!r}", "type")
         values["integrator"] = overrides["integrator"]
+    if overrides.get("schedule"):
+        if kind != "admm":
+            t.fail(f"--schedule applies to type = \"admm\", not {kind!r}", "type")
+        values["schedule"] = overrides["schedule"]
     desc = {"type": kind, **{k: v for k, v in values.items()}}
     if kind == "admm":
         contacts = t.get("contacts", "table", None)
