@@ -33,3 +33,16 @@ def segment_distances(p0, p1, q0, q1) -> np.ndarray:
     s = np.where(low, np.clip(-c / a, 0, 1), np.where(high, np.clip((b - c) / a, 0, 1), s))
     t = np.clip(t, 0.0, 1.0)
     return np.linalg.norm(p0 + s[..., None] * d1 - q0 - t[..., None] * d2, axis=-1)
+
+
+def rotation_matrix(axis, angle) -> np.ndarray:
+    """Rotation by ``angle`` [rad] about ``axis`` (Rodrigues' formula), 3x3."""
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+
+
+def curly_strand(n, i) -> np.ndarray:
+    """A curly strand of ``n`` vertices (one turn of a 4 mm helix down -y, 6.3 cm long), offset 1 cm along z per ``i``."""
+    s = np.linspace(0.0, 2.0 * np.pi, n)
+    return np.c_[0.004 * np.cos(s) - 0.004, -0.01 * s, 0.004 * np.sin(s) + 0.01 * i]

@@ -9,18 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from geometry import curly_strand, rotation_matrix
 from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
-
-
-def _rot(axis, angle):
-    axis = np.asarray(axis, float) / np.linalg.norm(axis)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
-
-
-def _curly(n, i):
-    s = np.linspace(0.0, 2.0 * np.pi, n)
-    return np.c_[0.004 * np.cos(s) - 0.004, -0.01 * s, 0.004 * np.sin(s) + 0.01 * i]
 
 
 def _groom(free=True):
@@ -30,7 +20,7 @@ def _groom(free=True):
     for i, n in enumerate(counts):
         mat = RodMaterial(damping_time=(0.02 if i % 2 == 0 else 0.0), ellipticity=0.2 * (i % 3))
         root = "free" if (free and i == 4) else "clamped"
-        b.add_strand(_curly(n, i), mat, root=root, body=i % 2)
+        b.add_strand(curly_strand(n, i), mat, root=root, body=i % 2)
     return b.finalize()
 
 
@@ -60,8 +50,8 @@ def _run_dynamic(schedule, measure, dual_frame="root", warm_start=True, tridiago
     assert solver.schedule == schedule
     for k in range(25):
         t = (k + 1) / 25
-        ctl.set_body_transform(0, _rot((0, 1, 0), 0.8 * t), (0.02 * t, 0.01 * math.sin(6 * t), 0.0))
-        ctl.set_body_transform(1, _rot((1, 0.3, 0), -0.5 * t), (0.0, 0.0, -0.01 * t))
+        ctl.set_body_transform(0, rotation_matrix((0, 1, 0), 0.8 * t), (0.02 * t, 0.01 * math.sin(6 * t), 0.0))
+        ctl.set_body_transform(1, rotation_matrix((1, 0.3, 0), -0.5 * t), (0.0, 0.0, -0.01 * t))
         solver.step(st, ctl, 1 / 96)
     return st.to_numpy(), solver
 
