@@ -69,7 +69,7 @@ from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_l
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
-from .lanes import CONTACT_ITERATION, WHOLE_STEP, LaneLayout, admm_iterations_lanes, lanes_gather, lanes_scatter
+from .lanes import CONTACT_ITERATION, ITERATIONS, LaneLayout, admm_iterations_lanes, lanes_gather, lanes_scatter
 from .schedule_strand import admm_iterations_strand
 from .state import Control, State
 from .strains import BERGOU, KORNER
@@ -345,11 +345,12 @@ class SolverADMM(SolverBase):
         """Step 4 of Algorithm 1, "strand" or "lanes" schedule: without contacts every iteration in one launch
         (``schedule_strand``, or ``lanes`` when no Anderson mixing), with contacts one launch per iteration and the
         z-step between them (it couples strands; the lanes are gathered once per step, and only x goes back between)."""
-        m, b, cfg, con, lanes = self.model, self.buf, self.config, self.contacts, self._lanes
+        m, b, cfg, con = self.model, self.buf, self.config, self.contacts
         x, theta = state.vertex_position, state.edge_twist
+        lanes = self._lanes if self._lanes is not None and not self._anderson_on() else None
 
         def launch(iterations: int, mode: int) -> None:
-            if lanes is not None and not self._anderson_on():
+            if lanes is not None:
                 admm_iterations_lanes(self.use_q, self.dynamic, self.twist_free, lanes, m, control.body_rotation, x, theta,
                                       state, b, g, v_air, cfg.air_viscosity, h, damping_scale, iterations, weight_floor, mode)
             else:
@@ -358,14 +359,13 @@ class SolverADMM(SolverBase):
                                        damping_scale, iterations, weight_floor, self.anderson, self.anderson.window,
                                        int(self._anderson_on()))  # (window 0 with contacts: no Anderson there)
 
-        if con is None:
-            launch(cfg.iterations, WHOLE_STEP)  # (a-g) for every iteration in one kernel
-            self.iteration_count += cfg.iterations
-            return self._tock("iterations", t0)
         if lanes is not None:
             lanes_gather(lanes, m, control.body_rotation, x, theta, state, b, damping_scale, weight_floor)
+        if con is None:
+            launch(cfg.iterations, ITERATIONS)  # (a-g) for every iteration in one kernel
+            self.iteration_count += cfg.iterations
         ccd_at = self._continuous_iterations()
-        for it in range(cfg.iterations):
+        for it in range(cfg.iterations if con is not None else 0):
             if it in ccd_at:
                 # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
                 con.detect_continuous(b.vertex_position_begin, x)
@@ -378,7 +378,7 @@ class SolverADMM(SolverBase):
             self.iteration_count += 1
         if lanes is not None:
             lanes_scatter(lanes, x, theta, state, b)
-        return t0
+        return self._tock("iterations", t0) if con is None else t0
 
     def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
                           t0: float) -> float:

@@ -4,7 +4,7 @@ strand schedule.
 The two do the same operations per strand, but the compiler orders and fuses the vector code's products otherwise
 (fast math), so they agree to f32 rounding, not to the bit: after 25 dynamic steps the largest position difference is
 ~3e-8 m on strands of a few centimetres (measured), and the tolerance below is 1e-6 of the largest coordinate.  The
-lanes schedule itself is deterministic (the same bits twice).  Each case compiles the lanes kernel once (~1 min cold:
+lanes schedule itself is deterministic (the same bits twice).  Each case compiles a variant of the lanes kernel (~12-25 s cold:
 it is large), so the cases are few and each covers several branches.
 """
 

@@ -2,7 +2,7 @@
 stage), :mod:`.layout` (the lane layout, gathers, scatters and lane arithmetic)."""
 
 from .layout import LANES, LaneLayout
-from .schedule import CONTACT_ITERATION, WHOLE_STEP, admm_iterations_lanes, lanes_gather, lanes_scatter
+from .schedule import CONTACT_ITERATION, ITERATIONS, admm_iterations_lanes, lanes_gather, lanes_scatter
 
-__all__ = ["CONTACT_ITERATION", "LANES", "LaneLayout", "WHOLE_STEP", "admm_iterations_lanes", "lanes_gather",
+__all__ = ["CONTACT_ITERATION", "ITERATIONS", "LANES", "LaneLayout", "admm_iterations_lanes", "lanes_gather",
            "lanes_scatter"]
