@@ -345,8 +345,7 @@ class SolverADMM(SolverBase):
         """Step 4 of Algorithm 1, "strand" or "lanes" schedule: without contacts every iteration in one launch
         (``schedule_strand``, or ``lanes`` when no Anderson mixing), with contacts one launch per iteration and the
         z-step between them (it couples strands; the lanes are gathered once per step, and only x goes back between)."""
-        m, b, cfg, con = self.model, self.buf, self.config, self.contacts
-        x, theta = state.vertex_position, state.edge_twist
+        m, b, cfg, con, x, theta = self.model, self.buf, self.config, self.contacts, state.vertex_position, state.edge_twist
         lanes = self._lanes if self._lanes is not None and not self._anderson_on() else None
 
         def launch(iterations: int, mode: int) -> None:
@@ -364,21 +363,22 @@ class SolverADMM(SolverBase):
         if con is None:
             launch(cfg.iterations, ITERATIONS)  # (a-g) for every iteration in one kernel
             self.iteration_count += cfg.iterations
-        ccd_at = self._continuous_iterations()
-        for it in range(cfg.iterations if con is not None else 0):
-            if it in ccd_at:
-                # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
-                con.detect_continuous(b.vertex_position_begin, x)
-                t0 = self._tock("continuous", t0)
-            # (b, c) z-step and lambda_z update, then (a, c-g) one iteration strand by strand.
-            con.project(x, b, con.config.projection_iterations)
-            t0 = self._tock("projection", t0)
-            launch(1, CONTACT_ITERATION)
-            t0 = self._tock("iterations", t0)
-            self.iteration_count += 1
+        else:
+            ccd_at = self._continuous_iterations()
+            for it in range(cfg.iterations):
+                if it in ccd_at:
+                    # Optional continuous-time detection from x^t to the current iterate (Alg. 1 l.5).
+                    con.detect_continuous(b.vertex_position_begin, x)
+                    t0 = self._tock("continuous", t0)
+                # (b, c) z-step and lambda_z update, then (a, c-g) one iteration strand by strand.
+                con.project(x, b, con.config.projection_iterations)
+                t0 = self._tock("projection", t0)
+                launch(1, CONTACT_ITERATION)
+                t0 = self._tock("iterations", t0)
+                self.iteration_count += 1
         if lanes is not None:
             lanes_scatter(lanes, x, theta, state, b)
-        return self._tock("iterations", t0) if con is None else t0
+        return self._tock("iterations", t0)
 
     def _iterations_stage(self, state: State, control: Control, dt: float, g, v_air, damping_scale: float,
                           t0: float) -> float:

@@ -46,3 +46,10 @@ def curly_strand(n, i) -> np.ndarray:
     """A curly strand of ``n`` vertices (one turn of a 4 mm helix down -y, 6.3 cm long), offset 1 cm along z per ``i``."""
     s = np.linspace(0.0, 2.0 * np.pi, n)
     return np.c_[0.004 * np.cos(s) - 0.004, -0.01 * s, 0.004 * np.sin(s) + 0.01 * i]
+
+
+def move_two_bodies(control, t) -> None:
+    """Body 0 turns 0.8 t rad about y while it shifts and bobs; body 1 turns -0.5 t rad about (1, 0.3, 0) and sinks:
+    the end-of-step transforms at time fraction ``t`` of the schedule tests' moving-roots scenes."""
+    control.set_body_transform(0, rotation_matrix((0, 1, 0), 0.8 * t), (0.02 * t, 0.01 * np.sin(6 * t), 0.0))
+    control.set_body_transform(1, rotation_matrix((1, 0.3, 0), -0.5 * t), (0.0, 0.0, -0.01 * t))

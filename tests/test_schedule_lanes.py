@@ -8,12 +8,11 @@ lanes schedule itself is deterministic (the same bits twice).  Each case compile
 it is large), so the cases are few and each covers several branches.
 """
 
-import math
 
 import numpy as np
 import pytest
 
-from geometry import curly_strand, rotation_matrix
+from geometry import curly_strand, move_two_bodies, rotation_matrix
 from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
 
 
@@ -36,9 +35,7 @@ def _run(schedule, dual_frame):
                                                 air_viscosity=2e-5))
     assert solver.schedule == schedule and not solver.twist_free
     for k in range(25):
-        t = (k + 1) / 25
-        ctl.set_body_transform(0, rotation_matrix((0, 1, 0), 0.8 * t), (0.02 * t, 0.01 * math.sin(6 * t), 0.0))
-        ctl.set_body_transform(1, rotation_matrix((1, 0.3, 0), -0.5 * t), (0.0, 0.0, -0.01 * t))
+        move_two_bodies(ctl, (k + 1) / 25)
         solver.step(st, ctl, 1 / 96)
     return st.to_numpy(), solver
 

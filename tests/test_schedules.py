@@ -4,12 +4,11 @@ Both schedules call the same per-element ``ti.func`` s in the same order per
 element; only the launch structure differs (see ``taichi_hair.schedule_strand``).
 """
 
-import math
 
 import numpy as np
 import pytest
 
-from geometry import curly_strand, rotation_matrix
+from geometry import curly_strand, move_two_bodies
 from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
 
 
@@ -49,9 +48,7 @@ def _run_dynamic(schedule, measure, dual_frame="root", warm_start=True, tridiago
     solver = SolverADMM(model, cfg)
     assert solver.schedule == schedule
     for k in range(25):
-        t = (k + 1) / 25
-        ctl.set_body_transform(0, rotation_matrix((0, 1, 0), 0.8 * t), (0.02 * t, 0.01 * math.sin(6 * t), 0.0))
-        ctl.set_body_transform(1, rotation_matrix((1, 0.3, 0), -0.5 * t), (0.0, 0.0, -0.01 * t))
+        move_two_bodies(ctl, (k + 1) / 25)
         solver.step(st, ctl, 1 / 96)
     return st.to_numpy(), solver
 

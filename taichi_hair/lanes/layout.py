@@ -283,6 +283,12 @@ def gather_targets(L: ti.template(), g, buf: ti.template()):
 
 
 @ti.func
+def lane_vec3(f: ti.template(), r, q: ti.template()):
+    """Lane q of the vector stored in row r of a (rows, 3) lane field, as a vec3."""
+    return vec3(f[r, 0][q], f[r, 1][q], f[r, 2][q])
+
+
+@ti.func
 def scatter_positions(L: ti.template(), g, x: ti.template()):
     """x of group g's real lanes back to the strands' layout (for the z-step between iterations)."""
     real = L.group_lane_real[g]
@@ -291,8 +297,7 @@ def scatter_positions(L: ti.template(), g, x: ti.template()):
         r = r0 + k
         for q in ti.static(range(LANES)):
             if real[q] != 0:
-                x[L.group_vertex_start[g][q] + k] = vec3(L.lane_position[r, 0][q], L.lane_position[r, 1][q],
-                                                         L.lane_position[r, 2][q])
+                x[L.group_vertex_start[g][q] + k] = lane_vec3(L.lane_position, r, q)
 
 
 @ti.func
@@ -305,13 +310,12 @@ def scatter(L: ti.template(), g, x: ti.template(), theta: ti.template(), es: ti.
         for q in ti.static(range(LANES)):
             if real[q] != 0:
                 i = L.group_vertex_start[g][q] + k
-                x[i] = vec3(L.lane_position[r, 0][q], L.lane_position[r, 1][q], L.lane_position[r, 2][q])
+                x[i] = lane_vec3(L.lane_position, r, q)
                 theta[i] = L.lane_twist[r][q]
-                es.edge_tangent[i] = vec3(L.lane_tangent[r, 0][q], L.lane_tangent[r, 1][q], L.lane_tangent[r, 2][q])
-                es.edge_reference_director[i] = vec3(L.lane_reference[r, 0][q], L.lane_reference[r, 1][q],
-                                                     L.lane_reference[r, 2][q])
-                es.edge_material_d1[i] = vec3(L.lane_d1[r, 0][q], L.lane_d1[r, 1][q], L.lane_d1[r, 2][q])
-                es.edge_material_d2[i] = vec3(L.lane_d2[r, 0][q], L.lane_d2[r, 1][q], L.lane_d2[r, 2][q])
+                es.edge_tangent[i] = lane_vec3(L.lane_tangent, r, q)
+                es.edge_reference_director[i] = lane_vec3(L.lane_reference, r, q)
+                es.edge_material_d1[i] = lane_vec3(L.lane_d1, r, q)
+                es.edge_material_d2[i] = lane_vec3(L.lane_d2, r, q)
                 d = buf.pair_dual[i]
                 f = buf.pair_force[i]
                 for c in ti.static(range(6)):

@@ -9,20 +9,20 @@ gain is gone (the same probe's ``gather_8``).  So this schedule works on a secon
 
 * the strands are grouped by eight of one vertex count (:class:`LaneLayout`; the last group of a count is
   padded with copies of its first strand, whose results are dropped);
-* :func:`admm_iterations_lanes`, one parallel loop over groups, gathers a group's constants and state into the
-  lane rows (one row per local vertex index, each value a vector of the eight strands'), runs every ADMM
-  iteration of the launch on them, and scatters the state back: the gathers are paid once per launch, not per
-  stage, and a group's rows (a few tens of kB) stay in cache throughout.
+* each step, :func:`lanes_gather` copies every group's constants and state into its lane rows (one row per local
+  vertex index, each value a vector of the eight strands'), :func:`admm_iterations_lanes` (one parallel loop over
+  groups) runs the iterations on them, and :func:`lanes_scatter` copies the state back: the gathers are paid once
+  per step, not per stage.  With contacts the iterations run one launch at a time, the z-step between them; each
+  launch takes in only the z-step's weights and targets and gives back only x.
 
 The iteration is Algorithm 1's steps (a)-(g) as in the strand schedule, stage for stage, for the Korner
 measure (the default) with the twist solved or the twist-free frames; each function below names the ``*_at``
 function whose arithmetic it repeats on lanes.  Branches that differ between strands (a fixed vertex, a body
-or none, a reversed tangent) become selects.  Not covered (the solver then keeps the strand schedule): the
-Bergou measure, Anderson mixing, contacts (their z-step runs between single iterations, so the gathers would
-not be amortised).
+or none, a reversed tangent) become selects.  Not covered: the Bergou measure (``SolverADMM`` refuses it with this
+schedule) and Anderson mixing (steps that mix run the strand kernel).
 
 The results agree with the strand schedule to rounding, not to the bit: the compiler fuses and orders the
-vector code's products otherwise (``tests/test_schedules.py`` states the tolerance).  Deterministic: the
+vector code's products otherwise (``tests/test_schedule_lanes.py`` states the tolerances).  Deterministic: the
 same bits from run to run (each lane's arithmetic does not depend on the others').
 """
 
@@ -247,15 +247,12 @@ def _thomas(L: ti.template(), r0, m, n_rhs: ti.template()):
     inv = 1.0 / L.lane_diag[r0]
     cp = L.lane_upper[r0] * inv
     L.lane_upper[r0] = cp
-    dp = [L.lane_rhs[r0, c] * inv for c in ti.static(range(n_rhs))]
-    d0 = dp[0]
-    d1 = dp[n_rhs - 1]
-    d2 = dp[n_rhs - 1]
-    if ti.static(n_rhs == 3):
-        d1 = dp[1]
-        d2 = dp[2]
+    # The carried d' of each column (columns 1 and 2: the positions' y and z only).
+    d0, d1, d2 = L.lane_rhs[r0, 0] * inv, V8(0.0), V8(0.0)
     L.lane_rhs[r0, 0] = d0
     if ti.static(n_rhs == 3):
+        d1 = L.lane_rhs[r0, 1] * inv
+        d2 = L.lane_rhs[r0, 2] * inv
         L.lane_rhs[r0, 1] = d1
         L.lane_rhs[r0, 2] = d2
     for k in range(1, m):
