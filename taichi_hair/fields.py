@@ -273,6 +273,10 @@ class ContactFields:
         self.contact_thickness = ti.field(float, c)
         #: Mass-split Delassus diagonal D_hat_c = sum_i n_i h_{c,i}^2 / W_z,i [m/N], shape (capacity,).
         self.contact_delassus = ti.field(float, c)
+        #: W_z,i^-1 h_{c,i} / D_hat_c for each of the contact's vertices: how far its correction moves each in the
+        #: sweeps one by one, 0 where D_hat_c = 0, the vertex is kinematic or unused (``narrow.store_push``)
+        #: [-], shape (capacity,).
+        self.contact_push = ti.field(vec4, c)
         #: Accumulated correction r_tilde_c = D_hat_c r_c (Sec. 4.5, footnote 3) [m], shape (capacity,).
         self.contact_accumulated = ti.field(vec3, c)
         #: Correction Delta u_c of the current batch [m], shape (capacity,).

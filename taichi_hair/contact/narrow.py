@@ -364,8 +364,25 @@ def relinearize_contacts(x: ti.template(), x0: ti.template(), radius: ti.templat
             con.contact_kinematic[c] = -ref - radius[i] * nrm
     for c in range(nc):
         con.contact_delassus[c] = _delassus(con, c, split_by_batch)
+        store_push(con, c)
     if ti.static(coefficients):
         store_entry_coefficients(con)
+
+
+@ti.func
+def store_push(con: ti.template(), c: ti.i32):
+    """``con.contact_push[c]``: W_z,i^-1 h_ci / D_hat_c for each vertex slot of contact c (0 where D_hat_c = 0 or the
+    slot is unused), what the sweeps one by one (``projection._solve_one``) multiply the contact's correction by.
+    Run wherever D_hat_c, the weights or W_z change; stored, not gathered, because a sweep read the vertices'
+    1/W_z and divided by D_hat_c for every contact again."""
+    dh = con.contact_delassus[c]
+    push = vec4(0.0)
+    if dh > 0.0:
+        for k in ti.static(range(4)):
+            v = con.contact_vertex[c][k]
+            if v >= 0:
+                push[k] = con.vertex_contact_inv_weight[v] * (con.contact_weight[c][k] / dh)
+    con.contact_push[c] = push
 
 
 @ti.func
@@ -497,5 +514,6 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
             con.contact_delta[c] = vec3(0.0)
             con.contact_status[c] = 0
         con.contact_delassus[c] = dh
+        store_push(con, c)
     if ti.static(coefficients):
         store_entry_coefficients(con)

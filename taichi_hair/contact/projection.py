@@ -133,16 +133,20 @@ def _solve_one(con: ti.template(), z: ti.template(), c: ti.i32):
         r_old = con.contact_accumulated[c]
         r_new, status = coulomb_local_solve(u_star - r_old, con.contact_normal[c], con.contact_friction[c])
         d = r_new - r_old  # (applied here: no ``contact_delta`` for a vertex pass to read)
-        con.contact_accumulated[c] = r_new
-        con.contact_status[c] = status
-        for k in ti.static(range(4)):
-            v = con.contact_vertex[c][k]
-            if v >= 0:
-                iw = con.vertex_contact_inv_weight[v]
-                if iw > 0.0:
+        # Only what changed is written: most contacts within the margin stay apart (r~ = 0 before and after;
+        # 85 % of the grooming benchmark's 153k), and their stores of r~, the status and z (z + 0 d) cost 20 % of
+        # a sweep (2.33 -> 1.86 ms, the same bits; scratch probe, 2026-12-06).
+        if status != con.contact_status[c]:
+            con.contact_status[c] = status
+        if d[0] != 0.0 or d[1] != 0.0 or d[2] != 0.0:
+            con.contact_accumulated[c] = r_new
+            push = con.contact_push[c]  # (W_z,i^-1 h_ci / D_hat_c, ``narrow.store_push``)
+            for k in ti.static(range(4)):
+                v = con.contact_vertex[c][k]
+                if v >= 0 and push[k] != 0.0:
                     # (Not ``+=``: in a parallel loop (``solve_contacts_slabs``) Taichi makes that an atomic add,
                     # a compare-and-swap loop per component; no other thread touches v here.)
-                    z[v] = z[v] + iw * (con.contact_weight[c][k] / dh) * d
+                    z[v] = z[v] + push[k] * d
 
 
 @ti.func
