@@ -32,6 +32,7 @@ contact is ever dropped silently.
 
 import taichi as ti
 
+from ..solver_base import on_gpu
 from .colliders import acts_on, body_transform, collider_distance
 from .grid import contact_normal, exclusive_scan, row_holds, segment_closest_points
 from .projection import BATCHES
@@ -453,27 +454,40 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
         con.active_vertex_count[None] = na
     for i in con.vertex_contact_count:
         con.vertex_contact_count[i] = 0
-    for c in range(nc):
-        for k in ti.static(range(4)):
-            v = con.contact_vertex[c][k]
-            if v >= 0:
-                slot = ti.atomic_add(con.vertex_contact_count[v], 1)
-                con.vertex_contact_list[con.vertex_contact_start[v] + slot] = c
-    # Sort each vertex's list by batch, then contact index (insertion sort; the atomics above fill in any
-    # order), and record where each batch begins: a batch's corrections then read only its own entries.
+    # Each vertex's list sorted by batch, then contact index: a batch's corrections then read only its own entries.
+    if ti.static(on_gpu()):
+        for c in range(nc):  # (in any order: sorted below)
+            for k in ti.static(range(4)):
+                v = con.contact_vertex[c][k]
+                if v >= 0:
+                    slot = ti.atomic_add(con.vertex_contact_count[v], 1)
+                    con.vertex_contact_list[con.vertex_contact_start[v] + slot] = c
+    else:
+        # On a CPU one thread fills the lists in that order, batch by batch: 2.5 times faster than the atomics and
+        # the sort (grooming benchmark, 153k contacts: 7.8 + 11 ms against ~3 + 4 ms; kernel profiler, 2026-12-06).
+        ti.loop_config(serialize=True)
+        for b in range(BATCHES):
+            for j in range((nc - b + BATCHES - 1) // BATCHES):
+                c = j * BATCHES + b
+                for k in ti.static(range(4)):
+                    v = con.contact_vertex[c][k]
+                    if v >= 0:
+                        con.vertex_contact_list[con.vertex_contact_start[v] + con.vertex_contact_count[v]] = c
+                        con.vertex_contact_count[v] += 1
     for i in con.vertex_contact_count:
         beg = con.vertex_contact_start[i]
         end = con.vertex_contact_start[i + 1]
-        for j in range(beg + 1, end):
-            key = con.vertex_contact_list[j]
-            k = j - 1
-            # (A break, not ``k >= beg and ...``: Taichi's ``and`` evaluates both sides, which read entry beg - 1.)
-            while k >= beg:
-                if not _batch_order_after(con.vertex_contact_list[k], key):
-                    break
-                con.vertex_contact_list[k + 1] = con.vertex_contact_list[k]
-                k -= 1
-            con.vertex_contact_list[k + 1] = key
+        if ti.static(on_gpu()):
+            for j in range(beg + 1, end):  # (insertion sort)
+                key = con.vertex_contact_list[j]
+                k = j - 1
+                # (A break, not ``k >= beg and ...``: Taichi's ``and`` evaluates both sides, which read entry beg - 1.)
+                while k >= beg:
+                    if not _batch_order_after(con.vertex_contact_list[k], key):
+                        break
+                    con.vertex_contact_list[k + 1] = con.vertex_contact_list[k]
+                    k -= 1
+                con.vertex_contact_list[k + 1] = key
         e = beg
         for b in ti.static(range(BATCHES)):
             while e < end:

@@ -133,9 +133,8 @@ def _solve_one(con: ti.template(), z: ti.template(), c: ti.i32):
         r_old = con.contact_accumulated[c]
         r_new, status = coulomb_local_solve(u_star - r_old, con.contact_normal[c], con.contact_friction[c])
         d = r_new - r_old  # (applied here: no ``contact_delta`` for a vertex pass to read)
-        # Only what changed is written: most contacts within the margin stay apart (r~ = 0 before and after;
-        # 85 % of the grooming benchmark's 153k), and their stores of r~, the status and z (z + 0 d) cost 20 % of
-        # a sweep (2.33 -> 1.86 ms, the same bits; scratch probe, 2026-12-06).
+        # Only what changed is written: most contacts stay apart (r~ = 0 before and after: 85 % of the grooming benchmark's
+        # 153k), and storing r~, status and z + 0 d cost 20 % of a sweep (2.33 -> 1.86 ms, the same bits; 2026-12-06).
         if status != con.contact_status[c]:
             con.contact_status[c] = status
         if d[0] != 0.0 or d[1] != 0.0 or d[2] != 0.0:
@@ -416,8 +415,8 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
 
     out = (sticking, sliding, separating, deepest body penetration [m], deepest hair-pair penetration [m],
     hair pairs crossed [-], hair pairs thinner than r_a + r_b (only with ``with_status`` = ``OVERLAPS``, else 0) [-]);
-    ``con.contact_penetration`` gets each contact's penetration; ``with_status`` (True)
-    also copies each contact's status to ``con.contact_status_admm``.
+    ``con.contact_penetration`` gets each contact's penetration.  ``with_status`` True: only the status counts
+    (out[0:3]) and each status copied to ``con.contact_status_admm`` (the step's statistics measure penetrations).
 
     Hair pair: the signed gap g = n . (p_a - p_b) - (r_a + r_b) at the contact's barycentric points with its
     normal n, which points from b to a at the beginning of the step (or, after the correction's
@@ -427,24 +426,31 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
     planes, spheres and capsules, the voxel SDF for meshes) at the end-of-step transform.
     """
     nc = ti.min(con.contact_count[None], con.capacity)
+    con.contact_tally[None] = ti.Vector([0.0] * 5)
     if ti.static(with_status == 1):
-        out[0] = 0.0
-        out[1] = 0.0
-        out[2] = 0.0
-    out[3] = 0.0
-    out[4] = 0.0
-    out[5] = 0.0
-    out[6] = 0.0
-    for c in range(nc):
-        if ti.static(with_status == 1):
+        for c in range(nc):
             st = con.contact_status[c]
             con.contact_status_admm[c] = st
-            if st == STICK:
-                ti.atomic_add(out[0], 1.0)
-            elif st == SLIDE:
-                ti.atomic_add(out[1], 1.0)
-            else:
-                ti.atomic_add(out[2], 1.0)
+            con.contact_tally[None] += ti.Vector([st == STICK, st == SLIDE, st != STICK and st != SLIDE, 0, 0], float)
+        for j in ti.static(range(3)):
+            out[j] = con.contact_tally[None][j]
+    else:
+        _penetrations(x, radius, cs, con, out)
+    if ti.static(with_status == OVERLAPS):  # hair pairs closer at rest than r_a + r_b (``keep_rest_overlaps``)
+        for c in range(nc):
+            vtx = con.contact_vertex[c]  # (vtx[2] is -1 on a body contact, and ``and`` evaluates both sides)
+            r_ab = radius[vtx[0]] + radius[ti.max(vtx[2], 0)]
+            thin = con.contact_collider[c] < 0 and con.contact_thickness[c] < r_ab * (1.0 - 1e-6)
+            con.contact_tally[None] += ti.Vector([0.0, 0.0, 0.0, 0.0, ti.select(thin, 1.0, 0.0)])
+        out[6] = con.contact_tally[None][4]
+
+
+@ti.func
+def _penetrations(x: ti.template(), radius: ti.template(), cs: ti.template(), con: ti.template(), out: ti.template()):
+    nc = ti.min(con.contact_count[None], con.capacity)  # (out[3:7] and the penetrations of ``contact_statistics``)
+    for j in ti.static(range(3, 7)):
+        out[j] = 0.0
+    for c in range(nc):
         pen = 0.0
         k = con.contact_collider[c]
         vtx = con.contact_vertex[c]
@@ -453,13 +459,10 @@ def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(
             d = w[0] * x[vtx[0]] + w[1] * x[vtx[1]] + w[2] * x[vtx[2]] + w[3] * x[vtx[3]]
             side = con.contact_normal[c].dot(d)
             pen = con.contact_thickness[c] - side
-            if side < 0.0:
-                ti.atomic_add(out[5], 1.0)
             if pen > out[4]:  # (read first: the maximum only grows, and most contacts are below it)
                 ti.atomic_max(out[4], pen)
-            if ti.static(with_status == OVERLAPS):
-                if con.contact_thickness[c] < (radius[vtx[0]] + radius[vtx[2]]) * (1.0 - 1e-6):
-                    ti.atomic_add(out[6], 1.0)  # a pair closer at rest than r_a + r_b (``keep_rest_overlaps``)
+            if side < 0.0:
+                ti.atomic_add(out[5], 1.0)
         else:
             R, T = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
             dist, nrm = collider_distance(cs, k, R.transpose() @ (x[vtx[0]] - T))
