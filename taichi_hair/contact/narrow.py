@@ -463,8 +463,9 @@ def build_adjacency(vertex: ti.template(), con: ti.template(), vertex_weight_bas
                     slot = ti.atomic_add(con.vertex_contact_count[v], 1)
                     con.vertex_contact_list[con.vertex_contact_start[v] + slot] = c
     else:
-        # On a CPU one thread fills the lists in that order, batch by batch: 2.5 times faster than the atomics and
-        # the sort (grooming benchmark, 153k contacts: 7.8 + 11 ms against ~3 + 4 ms; kernel profiler, 2026-12-06).
+        # On a CPU one thread fills the lists in that order, batch by batch, with no sort after: the fill and the
+        # per-vertex loop 7.8 + 11 ms with the atomics and the sort, 8.0 + 5.3 ms so (grooming benchmark, 153k
+        # contacts; kernel profiler, 2026-12-06).
         ti.loop_config(serialize=True)
         for b in range(BATCHES):
             for j in range((nc - b + BATCHES - 1) // BATCHES):
