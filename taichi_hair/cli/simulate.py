@@ -68,9 +68,7 @@ def _named_scene(args):
 
     d = {k: (getattr(args, k) if getattr(args, k) is not None else v) for k, v in NAMED_DEFAULTS.items()}
     iterations = d["iterations"]
-    integ = dict(integrator=args.integrator) if args.integrator else {}
-    if args.schedule:
-        integ["schedule"] = args.schedule
+    integ = {k: getattr(args, k) for k in ("integrator", "schedule") if getattr(args, k)}  # (SolverADMMConfig options)
     if args.scene == "hang":
         hs = HangScene(strands=d["strands"], length=args.length if args.length else 0.2, seed=d["seed"])
         cfg = SolverADMMConfig(iterations=iterations, mode="dynamic", **integ)

@@ -328,14 +328,11 @@ def solver_from_table(t: Table, overrides: dict, colliders: list):
                "local_iterations / length_iterations for \"shape\"", "type")
     if "iterations" in overrides:
         values["iterations"] = overrides["iterations"]
-    if overrides.get("integrator"):
-        if kind != "admm":
-            t.fail(f"--integrator applies to type = \"admm\", not {kind!r}", "type")
-        values["integrator"] = overrides["integrator"]
-    if overrides.get("schedule"):
-        if kind != "admm":
-            t.fail(f"--schedule applies to type = \"admm\", not {kind!r}", "type")
-        values["schedule"] = overrides["schedule"]
+    for key in ("integrator", "schedule"):  # (options of SolverADMMConfig only)
+        if overrides.get(key):
+            if kind != "admm":
+                t.fail(f"--{key} applies to type = \"admm\", not {kind!r}", "type")
+            values[key] = overrides[key]
     desc = {"type": kind, **{k: v for k, v in values.items()}}
     if kind == "admm":
         contacts = t.get("contacts", "table", None)
