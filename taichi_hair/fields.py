@@ -433,6 +433,14 @@ class PairFields:
             self.edge_anchor_start = ti.Vector.field(3, float, n)
             self.edge_anchor_end = ti.Vector.field(3, float, n)
             self.edge_pair_both_list = ti.field(ti.i32, 2 * capacity)
+            #: Where the vertices were when ``contact.pairs.lists_from_pairs`` last ran [m], shape (vertex_count,), and
+            #: the largest displacement since [m], shape (): each stored pair's ``pair_distance`` is its distance there
+            #: or a lower bound of it (a pair found since: of its distance now).
+            self.vertex_listed_position = ti.Vector.field(3, float, n)
+            self.vertex_max_move = ti.field(float, ())
+            #: Whether each stored pair is within reach (r_a + r_b + margin) at the last ``lists_from_pairs`` [-],
+            #: shape (capacity,).
+            self.pair_within = ti.field(ti.i8, capacity)
         #: The two edges of each pair, lower first [-], shape (capacity, 2); their distance [m], shape (capacity,).
         self.pair_edge = ti.Vector.field(2, ti.i32, capacity)
         self.pair_distance = ti.field(float, capacity)

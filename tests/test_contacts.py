@@ -11,7 +11,7 @@ from taichi_hair.contact.colliders import CapsuleCollider, ColliderSet, MeshColl
 from taichi_hair.config import ContactConfig
 from taichi_hair.contact.projection import hold_strand_lengths
 
-from geometry import segment_distance
+from geometry import segment_distance, segment_distances
 
 HAIR = RodMaterial()
 R = HAIR.radius
@@ -166,7 +166,8 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
     edge, the others a part of them (at least 8 of 12 fewer than half).  A Model update that keeps the radii,
     strands and kinematic vertices (a grooming edit: ``set_coefficients`` at step 8) keeps the pairs, and only the
     edges that moved search; one that changes a radius (step 10), or a margin changed on the config (step 11),
-    searches every edge again."""
+    searches every edge again.  Every stored pair's distance is its distance or a lower bound of it (a pair that
+    cannot have come within reach keeps a bound, not measured again), and some pairs keep a bound."""
     from dataclasses import replace
     from taichi_hair.contact.pipeline import ContactPipeline
 
@@ -182,6 +183,7 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
     fast = rng.random(model.strand_count) < 1 / 3
     edges = int(np.count_nonzero(model.host["edge_rest_length"] > 0))
     searched = []
+    bounded = 0
     for step in range(12):
         if step > 0 and step != 5:  # (step 5: nothing moves)
             size = np.where(fast[strand], rng.uniform(5e-5, 5e-4), rng.uniform(0.0, 1e-5))[:, None]
@@ -204,6 +206,15 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
             lists.append([g.edge_candidate_count.to_numpy(), g.edge_candidate.to_numpy(),
                           g.edge_candidate_distance.to_numpy()])
         (c0, e0, d0), (c1, e1, d1) = lists
+        # Each stored pair's distance is its distance now or a lower bound of it (``lists_from_pairs`` measures only
+        # the pairs that may be within reach; a segment distance moves by at most its vertices' largest displacement):
+        # float64 distances of the float32 positions, 1e-8 m for the kernels' rounding.
+        pr, xs = pipes[0].pairs, st.vertex_position.to_numpy().astype(np.float64)
+        npair = int(pr.pair_count[None])
+        pe, pd = pr.pair_edge.to_numpy()[:npair], pr.pair_distance.to_numpy()[:npair]
+        true = segment_distances(xs[pe[:, 0]], xs[pe[:, 0] + 1], xs[pe[:, 1]], xs[pe[:, 1] + 1])
+        assert np.all(pd <= true + 1e-8), step
+        bounded += int(np.count_nonzero(pd < true - 1e-8))
         assert np.array_equal(c0, c1), step
         for a in np.nonzero(c0)[0]:
             k = c0[a]
@@ -211,6 +222,7 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
             assert np.allclose(d0[a, :k], d1[a, :k], rtol=0.0, atol=1e-8), (step, a)
         assert c0.sum() > 100
         searched.append(pipes[0].statistics(st.vertex_position)["pair_skin_edges_searched"])
+    assert bounded > 0  # (some pairs kept a bound: at step 5 nothing moved)
     assert searched[0] == edges and searched[10] == edges and searched[11] == edges, searched
     assert 0 < searched[8] < edges // 2, searched
     assert searched[5] == 0 and sum(0 < k < edges // 2 for k in searched) >= 8, searched
