@@ -956,11 +956,13 @@ def test_the_slab_parallel_sweep_keeps_every_contact_touches_disjoint_vertices_a
     tuples and weights, sorted), the groups of each parallel phase touch disjoint vertex sets, every phase has
     contacts, and the frictionless z-step (a strictly convex QP, unique solution) swept 400 times reaches the
     projection of the plain one-by-one order (the detection's order, unsorted) to 1e-7 m (f32; measured 1.5 nm),
-    after one sweep it differs (another Gauss-Seidel order: 16 um measured); two runs give the same bits.  532
+    after one sweep it differs (another Gauss-Seidel order: 16 um measured); the slab groups on threads and in their
+    order on one thread (``projection.SLAB_ORDER``) give the same bits.  532
     contacts: 223 in the slabs' own groups, 285 between neighbours, 24 in the rest.  With the cross rod last the
     slabs are not runs of vertex indices, and the pipeline does not use them; with the rods in reverse order as well
     they are runs again, descending, and it does."""
     from taichi_hair.contact import pipeline as pipeline_module
+    from taichi_hair.contact.projection import SEQUENTIAL, SLAB_ORDER, SLABS
     from taichi_hair.contact.slabs import REST_GROUP
     from taichi_hair.fields import CONTACT_SLABS as S
 
@@ -975,14 +977,18 @@ def test_the_slab_parallel_sweep_keeps_every_contact_touches_disjoint_vertices_a
     x1 = st.positions().astype(np.float64)
     x1[:11, 1] -= 2e-4
     out, keys = [], []
-    for order in ("sequential", "auto", "auto"):
-        # ("sequential" with the correction in batches: no slab groups, the detection's own order.)
+    for order, threads in (("sequential", 0), ("auto", 1 << 30), ("auto", 0)):
+        # ("sequential" with the correction in batches: no slab groups, the detection's own order.)  The slab groups
+        # in their order on one thread (``SLAB_ORDER``: Taichi's threads up to ``_SLAB_THREADS``), then on threads.
+        monkeypatch.setattr(pipeline_module, "_SLAB_THREADS", threads)
         cfg = ContactConfig(friction=0.0, velocity_margin=0.0, projection_contact_order=order,
                             correction_contact_order="batches" if order == "sequential" else "auto")
         solver = SolverADMM(model, SolverADMMConfig(contacts=cfg))
         pl = solver.contacts
         pl.detect(st, 1 / 96, (0.0, 0.0, 0.0), False)
         assert pl.slabs_contiguous and pl._slabs == (order == "auto")
+        assert pl._projection_order(False) == {"sequential": SEQUENTIAL, 1 << 30: SLAB_ORDER, 0: SLABS}[
+            order if order == "sequential" else threads]
         c, nc = pl.con, pl.contact_count
         vtx = c.contact_vertex.to_numpy()[:nc]
         w = c.contact_weight.to_numpy()[:nc]

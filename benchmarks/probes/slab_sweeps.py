@@ -9,9 +9,10 @@ the benchmark (one per commit) cannot resolve a 5-10 % change; this probe altern
 process, on the same contacts:
 
 1. *Sweeps*: after three steps, ``--sweeps`` z-step sweeps in index order (``projection.SEQUENTIAL``) then as many in
-   slab groups (``projection.SLABS``, ``contact.slabs``) from the same z, six times over (ms per sweep each time).
-   Both run on the contacts sorted by slab group, so they are the same Gauss-Seidel order (the same result); only
-   the threads differ.
+   slab groups (``projection.SLABS``, ``contact.slabs``) then as many in the slab groups' order on one thread
+   (``projection.SLAB_ORDER``), each from the same z and r~, six times over (ms per sweep each time).  All run on the
+   contacts sorted by slab group; the slab groups on threads and in their order on one thread are the same
+   Gauss-Seidel order (checked: the same bits of z), index order is another (groups between slabs 1|2 before 2|3).
 2. *Steps*: ``--steps`` pairs of whole steps, one with the slabs (``ContactPipeline.slabs_contiguous`` left as the
    Model gives it) and one without (set to False before the step: the detection's own order, one thread), in turn
    (ms per step and the correction's sweeps of each).  Their Gauss-Seidel orders differ, so their sweeps may too.
@@ -39,7 +40,7 @@ def main(argv=None) -> int:
 
     ti.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN)
     from groom_drag import benchmark_session  # (this folder: the grooming benchmark's groom and session)
-    from taichi_hair.contact.projection import SEQUENTIAL, SLABS, projection_sweep
+    from taichi_hair.contact.projection import SEQUENTIAL, SLAB_ORDER, SLABS, projection_sweep
 
     _, session = benchmark_session(a.strands)
     session._ensure_built()
@@ -49,12 +50,16 @@ def main(argv=None) -> int:
     print(f"{sim.model.strand_count} guides; the Model's slabs are runs of vertex indices: {runs}")
     for _ in range(3):
         sim.step()
-    sweeps = {"index order": [], "slabs": []}
+    sweeps = {"index order": [], "slabs": [], "slab order": []}
+    same = True
     if pipeline._slabs:
         z0 = pipeline.con.vertex_z.to_numpy()
+        r0 = pipeline.con.contact_accumulated.to_numpy()
         for _ in range(6):
-            for name, mode in (("index order", SEQUENTIAL), ("slabs", SLABS)):
+            ends = {}
+            for name, mode in (("index order", SEQUENTIAL), ("slabs", SLABS), ("slab order", SLAB_ORDER)):
                 pipeline.con.vertex_z.from_numpy(z0)
+                pipeline.con.contact_accumulated.from_numpy(r0)
                 projection_sweep(pipeline.con, mode)
                 ti.sync()
                 t = time.perf_counter()
@@ -62,9 +67,13 @@ def main(argv=None) -> int:
                     projection_sweep(pipeline.con, mode)
                 ti.sync()
                 sweeps[name].append((time.perf_counter() - t) / a.sweeps * 1e3)
+                ends[name] = pipeline.con.vertex_z.to_numpy()
+            same = same and np.array_equal(ends["slabs"], ends["slab order"])
         for name, v in sweeps.items():
             print(f"sweep, {name}: " + " ".join(f"{t:.2f}" for t in v) + f" ms (median {np.median(v):.2f})")
-        print(f"sweep: index order / slabs {np.median(sweeps['index order']) / np.median(sweeps['slabs']):.2f}")
+        print(f"sweep: index order / slabs {np.median(sweeps['index order']) / np.median(sweeps['slabs']):.2f}, "
+              f"slab order (one thread) / slabs {np.median(sweeps['slab order']) / np.median(sweeps['slabs']):.2f}; "
+              f"slabs and slab order end at the same bits: {same}")
     else:
         print(f"no slab sweeps at this step ({pipeline.contact_count} contacts): sweeps not compared")
     steps = {"slabs": [], "index order": []}

@@ -19,6 +19,12 @@ from .projection import warn_soft_rest_lengths
 #: ponytail (11,000) 1,001 -> 679; the 1,000-strand hairball (35,650 on average, 70k in the pile) 2,121 parallel,
 #: 2,060 with this bound, 2,002 all serial.  Kept low so that machines with more cores keep their parallelism.
 _SERIAL_CONTACTS = 20_000
+#: CPU threads up to which the slab groups' sweeps (``contact.slabs``) run on the launching thread, in the same order
+#: (``projection.SLAB_ORDER``; the same bits) [-].  Measured on 2 threads (grooming benchmark, 153k contacts, in one
+#: process, ``benchmarks/probes/slab_sweeps.py``, 2026-12-06, medians of 6): a sweep 1.16 / 1.27 ms on one thread
+#: (index order and slab order) against 1.63 / 1.78 ms in parallel in two runs, 1.90 against 1.89 in a third.  Not
+#: measured with more threads: there the groups keep their threads.
+_SLAB_THREADS = 2
 #: Vertices under which the correction's edge passes and acceleration run serially on the CPU [-].
 _SERIAL_VERTICES = 20_000
 #: (v0, omega, c) of the world frame: hair-hair reaches from the plain velocities (``ContactConfig.rigid_reach`` off).
@@ -180,9 +186,9 @@ class ContactPipeline:
         """Whether a sweep of this step may run in the paper's 8 batches (the z-step's ``projection_contact_order``,
         the correction's ``correction_contact_order``; "auto": batches on a GPU, and on the CPU in the dynamic mode
         for the z-step), so the entry coefficients they read must be stored (``narrow.store_entry_coefficients``)."""
-        from .projection import SEQUENTIAL, SLABS
+        from .projection import SEQUENTIAL, SLAB_ORDER, SLABS
 
-        return not {self._projection_order(dynamic), self._correction_order()} <= {SEQUENTIAL, SLABS}
+        return not {self._projection_order(dynamic), self._correction_order()} <= {SEQUENTIAL, SLABS, SLAB_ORDER}
 
     def _projection_order(self, dynamic: bool):
         """``serial`` of the z-step's sweeps (``sweep_order``; "auto": one by one in the quasistatic mode on a CPU)."""
@@ -195,13 +201,17 @@ class ContactPipeline:
     def sweep_order(self, order, auto_one_by_one: bool):
         """``serial`` of the sweeps (``projection.sweep_contacts``) for a contact order: ``"sequential"`` one by one in
         index order; ``"auto"`` where ``auto_one_by_one``, one by one in slab groups (``contact.slabs``; in index
-        order where the contacts are few); otherwise the batches (on the launching thread where they are few)."""
-        from .projection import SEQUENTIAL, SLABS
+        order where the contacts are few), their groups on several threads only where Taichi has more than
+        ``_SLAB_THREADS`` (else the same order on one: the same bits); otherwise the batches (on the launching thread
+        where they are few)."""
+        from .projection import SEQUENTIAL, SLAB_ORDER, SLABS
 
         if order == CorrectionContactOrder.SEQUENTIAL:
             return SEQUENTIAL
         if order == CorrectionContactOrder.AUTO and auto_one_by_one:
-            return SLABS if self._slabs else SEQUENTIAL
+            if not self._slabs:
+                return SEQUENTIAL
+            return SLABS if ti.lang.impl.current_cfg().cpu_max_num_threads > _SLAB_THREADS else SLAB_ORDER
         return self._serial_contacts
 
     @property
@@ -296,10 +306,10 @@ class ContactPipeline:
                           f"growing it to {new_cap} and detecting again (no contact dropped)", stacklevel=3)
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
-        from .projection import SLABS
+        from .projection import SLAB_ORDER, SLABS
 
         self._slabs = (not on_gpu()) and total >= _SERIAL_CONTACTS and self.slabs_contiguous
-        self._slabs = self._slabs and SLABS in (self._projection_order(dynamic), self._correction_order())
+        self._slabs = self._slabs and bool({SLABS, SLAB_ORDER} & {self._projection_order(dynamic), self._correction_order()})
         if self._slabs:
             from .slabs import group_contacts
 

@@ -158,11 +158,11 @@ def solve_contacts_sequential(con: ti.template(), z: ti.template()):
         _solve_one(con, z, c)
 
 
-#: ``serial`` of the sweeps: the contacts one by one in slab groups, groups with disjoint vertices in parallel.
-SLABS = 3
-#: Loop iterations per slab group in ``solve_contacts_slabs`` [-].  Taichi 1.7 on a CPU hands a parallel loop to its
-#: threads in blocks of at least 512 iterations (its adaptive block size; ``ti.loop_config(block_dim=...)`` did not
-#: change it), so a loop over 8 groups ran on one thread (measured: no faster than serial); 512 iterations per
+#: ``serial`` of the sweeps: the contacts one by one in slab groups, groups with disjoint vertices in parallel; or the
+#: same groups in the same order on the launching thread (the same bits: ``ContactPipeline.sweep_order`` says where).
+SLABS, SLAB_ORDER = 3, 4
+#: Loop iterations per slab group in ``solve_contacts_slabs`` [-]: Taichi 1.7's CPU threads take a parallel loop in
+#: blocks of >= 512 iterations (``block_dim`` did not change it), so a loop over 8 groups ran on one thread; 512 per
 #: group, all but the first empty, give each group a block of its own.
 _TASK_STRIDE = 512
 
@@ -174,24 +174,25 @@ def _solve_range(con: ti.template(), z: ti.template(), begin: ti.i32, end: ti.i3
 
 
 @ti.func
-def solve_contacts_slabs(con: ti.template(), z: ti.template()):
-    """Steps (1) and (2) for every contact one by one, in the four phases of ``contact.slabs`` (each a parallel
-    loop over groups with disjoint vertex sets, one group per task; the groups sorted by ``slabs.group_contacts``)."""
+def solve_contacts_slabs(con: ti.template(), z: ti.template(), parallel: ti.template()):
+    """Steps (1) and (2) for every contact one by one, in the four phases of ``contact.slabs`` (the groups sorted by
+    ``slabs.group_contacts``): the slabs' own groups, those between slabs 0|1, 2|3, ..., those between 1|2, 3|4, ...,
+    then the rest.  ``parallel``: each of the first three a parallel loop over its groups (disjoint vertex sets), one
+    group per task; else every group on the launching thread, in the same order (so the same bits)."""
     S = ti.static(CONTACT_SLABS)
     T = ti.static(_TASK_STRIDE)
     start = ti.static(con.contact_group_start)
-    for k in range(S * T):  # (one group per T iterations: see _TASK_STRIDE)
-        if k % T == 0:
-            g = k // T
-            _solve_range(con, z, start[g], start[g + 1])
-    for k in range(S // 2 * T):  # between slabs 0|1, 2|3, ...
-        if k % T == 0:
-            g = S + 2 * (k // T)
-            _solve_range(con, z, start[g], start[g + 1])
-    for k in range((S - 1) // 2 * T):  # between slabs 1|2, 3|4, ...
-        if k % T == 0:
-            g = S + 2 * (k // T) + 1
-            _solve_range(con, z, start[g], start[g + 1])
+    for first, step, count in ti.static(((0, 1, S), (S, 2, S // 2), (S + 1, 2, (S - 1) // 2))):
+        if ti.static(parallel):
+            for k in range(count * T):  # (one group per T iterations: see _TASK_STRIDE)
+                if k % T == 0:
+                    g = first + step * (k // T)
+                    _solve_range(con, z, start[g], start[g + 1])
+        else:
+            ti.loop_config(serialize=True)
+            for k in range(count):
+                g = first + step * k
+                _solve_range(con, z, start[g], start[g + 1])
     ti.loop_config(serialize=True)
     for _ in range(1):  # the rest, and the contacts appended since the detection
         _solve_range(con, z, start[2 * S - 1], ti.min(con.contact_count[None], con.capacity))
@@ -485,11 +486,11 @@ def projection_begin(x: ti.template(), con: ti.template(), correction: ti.templa
 def sweep_contacts(con: ti.template(), serial: ti.template()):
     """Every contact once on z: the 8 batches in turn (``serial``: each loop on the launching thread), or with
     ``serial = SEQUENTIAL`` each contact in index order, its push applied before the next is solved, or with
-    ``SLABS`` one by one in the slab groups of ``contact.slabs``, on several threads."""
+    ``SLABS`` one by one in the slab groups of ``contact.slabs``, on several threads (``SLAB_ORDER``: on one)."""
     if ti.static(serial == SEQUENTIAL):
         solve_contacts_sequential(con, con.vertex_z)
-    elif ti.static(serial == SLABS):
-        solve_contacts_slabs(con, con.vertex_z)
+    elif ti.static(serial == SLABS or serial == SLAB_ORDER):
+        solve_contacts_slabs(con, con.vertex_z, serial == SLABS)
     else:
         for batch in ti.static(range(BATCHES)):
             solve_batch_contacts(con, con.vertex_z, batch, serial)

@@ -30,7 +30,10 @@ a sweep 3.2 ms one by one in index order, 2.6 ms in slabs with the guides in ind
 ms with the guides ordered (phase 1 at twice the serial rate).  From 0dcd407 to 2026-12-06 the grooming tool's
 slabs came out as descending runs (the axis's sign, see :func:`principal_axis_order`) and the pipeline did not use
 them; re-measured after the fix in one process (``benchmarks/probes/slab_sweeps.py``): a sweep 0.92-1.12x the
-time of the same contacts one by one, a still step 1.04-1.08x, within this VM's drift.
+time of the same contacts one by one, a still step 1.04-1.08x, within this VM's drift.  After the sweeps one by one
+got cheaper (2026-12-06) the phases on 2 threads took 1.4x the time of the same groups in the same order on one
+(``projection.SLAB_ORDER``, the same bits), which is what a CPU with up to 2 threads now runs
+(``pipeline._SLAB_THREADS``): the grouping stays for its order and its locality.
 """
 
 import numpy as np
