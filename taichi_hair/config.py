@@ -522,9 +522,9 @@ class SolverADMMConfig:
             launches per iteration; suits GPUs), ``"strand"`` runs all
             iterations in one kernel parallel over strands, each strand's
             stages serially (suits CPUs; bit-identical to ``"stage"`` on CPU),
-            ``"auto"`` picks ``"strand"`` on CPU and ``"stage"`` on GPU archs
-            (and ``"stage"`` when ``tridiagonal="pcr"``); ``"lanes"`` (CPU, Korner) the
-            strand schedule on lanes of eight strands (:mod:`taichi_hair.lanes`).
+            ``"lanes"`` (CPU, Korner) the strand schedule on lanes of eight strands (:mod:`taichi_hair.lanes`);
+            ``"auto"``: ``"stage"`` on GPU archs and with ``tridiagonal="pcr"``, on a CPU ``"lanes"`` for Models of
+            50,000 vertices or more (``lanes.auto_schedule``), ``"strand"`` below.
         check_finite: after each step, check every state value for NaN/inf
             and raise :class:`SimulationDivergedError` naming the strand.
         contacts: :class:`ContactConfig` to enable frictional contacts

@@ -69,7 +69,7 @@ from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_l
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
-from .lanes import CONTACT_ITERATION, ITERATIONS, LaneLayout, admm_iterations_lanes, lanes_gather, lanes_scatter
+from .lanes import CONTACT_ITERATION, ITERATIONS, LaneLayout, admm_iterations_lanes, auto_schedule, lanes_gather, lanes_scatter
 from .schedule_strand import admm_iterations_strand
 from .state import Control, State
 from .strains import BERGOU, KORNER
@@ -127,8 +127,8 @@ class SolverADMM(SolverBase):
         self._set_coefficients()
         gpu = on_gpu()
         schedule = cfg.schedule
-        if schedule == Schedule.AUTO:
-            schedule = Schedule.STAGE if gpu or cfg.tridiagonal == Tridiagonal.PCR else Schedule.STRAND
+        if schedule == Schedule.AUTO:  # ("lanes" on a CPU only for large Models: lanes.AUTO_LANES_VERTICES)
+            schedule = auto_schedule(gpu, cfg.tridiagonal == Tridiagonal.PCR, self.measure == KORNER, model.vertex_count)
         elif schedule != Schedule.STAGE and cfg.tridiagonal == Tridiagonal.PCR:
             raise ValueError(f"SolverADMMConfig.tridiagonal='pcr' cannot be used with SolverADMMConfig.schedule="
                              f"'{schedule}' (it solves each strand with Thomas)")

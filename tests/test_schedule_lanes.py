@@ -94,6 +94,25 @@ def test_lanes_need_the_korner_measure():
         SolverADMMConfig(schedule="lanes", tridiagonal="pcr")
 
 
+def test_auto_takes_the_lanes_on_a_cpu_only_for_large_models_with_korner_strains(monkeypatch):
+    """``schedule = "auto"`` (``lanes.auto_schedule``): "stage" on a GPU or with the PCR solve; on a CPU "lanes" from
+    ``AUTO_LANES_VERTICES`` vertices with Korner strains, "strand" one vertex below it or with Bergou's; a solver
+    resolves its "auto" so (the threshold set to a 5-vertex Model's size; no step, so nothing compiles the lanes)."""
+    from taichi_hair import lanes
+    from taichi_hair.lanes import AUTO_LANES_VERTICES as n, auto_schedule
+
+    assert auto_schedule(True, False, True, n) == "stage" and auto_schedule(False, True, True, n) == "stage"
+    assert auto_schedule(False, False, True, n) == "lanes"
+    assert auto_schedule(False, False, True, n - 1) == "strand" and auto_schedule(False, False, False, n) == "strand"
+    b = GroomBuilder()
+    b.add_strand(np.c_[np.linspace(0.0, 0.03, 5), np.zeros(5), np.zeros(5)], RodMaterial())
+    model = b.finalize()
+    assert SolverADMM(model).schedule == "strand"
+    monkeypatch.setattr(lanes, "AUTO_LANES_VERTICES", model.vertex_count)
+    assert SolverADMM(model).schedule == "lanes"
+    assert SolverADMM(model, SolverADMMConfig(strain_measure="bergou")).schedule == "strand"
+
+
 def test_lanes_with_hair_contacts_follow_the_strand_schedule():
     """A step with contacts runs the z-step between single iterations: the lanes are gathered once per step, take the
     z-step's weights and targets before each iteration and give x back after it.  Twelve wavy strands hang in a tight

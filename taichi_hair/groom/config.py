@@ -81,7 +81,8 @@ class GroomingConfig:
             every frame, the correction at its 80-sweep cap; at 10 they stay within 0.12 mm (p90) of their authored
             shape, the groom comes to rest and the correction stops after 15 sweeps: 1,003 against 496 ms of simulation
             per frame (``bench_groom.py --rest-pose sag-free --unheld-shape-weight 0|10``, commit 1de4086).
-        schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (strand on CPU, stage on GPU),
+        schedule: launch schedule of the guides' ADMM iterations, ``"auto"`` (``lanes.auto_schedule``: on a CPU lanes
+            from 50,000 guide vertices, strand below; stage on a GPU),
             ``"stage"``, ``"strand"`` or ``"lanes"`` (SolverADMMConfig.schedule: the same results, to rounding for
             ``"lanes"``; other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
