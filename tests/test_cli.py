@@ -36,7 +36,7 @@ def test_simulate_hang_writes_frames_and_statistics(tmp_path):
     assert len(rows) == 6 and float(rows[-1]["max_stretch_percent"]) < 1.0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["frames"] == 6 and summary["diverged"] is None
-    assert summary["model"]["schedule"] == "strand"  # the CPU default (--schedule lanes is opt-in)
+    assert summary["model"]["schedule"] == "strand"  # the CPU default under 50,000 vertices (lanes.auto_schedule)
 
 
 def test_validate_cantilever_small_sweep(tmp_path):

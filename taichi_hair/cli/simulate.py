@@ -320,9 +320,9 @@ def register(sub) -> None:
                    help="admm time integrator (default the scene's, else backward_euler; bdf2 is second order "
                         "and keeps a swing's energy, SolverADMMConfig.integrator)")
     s.add_argument("--schedule", choices=("auto", "stage", "strand", "lanes"), default=None,
-                   help="admm launch schedule (SolverADMMConfig.schedule; default the scene's, else auto): 'lanes' runs "
-                        "the iteration on lanes of eight strands, 2-5x the ADMM throughput on a CPU after ~25 s of "
-                        "kernel compilation per groom size")
+                   help="admm launch schedule (SolverADMMConfig.schedule; default the scene's, else auto: on a CPU "
+                        "lanes from 50,000 vertices, strand below): 'lanes' runs the iteration on lanes of eight "
+                        "strands, 2-5x the ADMM throughput on a CPU after ~25 s of kernel compilation per groom size")
     s.add_argument("--rest-pose", choices=("authored", "sag-free", "file"), default=None,
                    help="rest pose of the groom: 'authored' (its shape; default), 'sag-free' (rest strains solved "
                         "so that the shape holds under gravity) or 'file' (the groom file's rest curve, e.g. from "

@@ -264,7 +264,8 @@ def lists_from_pairs(x: ti.template(), radius: ti.template(), grid: ti.template(
     pairs within reach, so the same lists (the grooming benchmark's still step: 24 % of 665k pairs within reach).
     The pairs within reach are counted by edge where they are measured.  Measured in one process on that step's pairs,
     a vertex moved 20 um (scratch ``/tmp/p/s27/lfp_bench.py``, medians of 15, 2026-12-06): 21.4 -> 16.7 ms, the same
-    lists; a fill by one thread in pair order instead of the atomics was slower (10.2 against 9 ms)."""
+    lists.  A fill by one thread in pair order instead of the atomics was not faster (profiled in separate runs:
+    10.2 ms against 9 ms for the two parallel loops)."""
     K = ti.static(grid.candidates_per_edge)
     n = grid.edge_candidate_count.shape[0]
     count = ti.min(pairs.pair_count[None], pairs.capacity)
