@@ -803,9 +803,11 @@ def test_an_edit_builds_only_the_guides_it_changed_and_the_host_arrays_equal_a_f
     each), only those 7 are built, and every host array equals a full ``GroomBuilder`` build's, dtype and bits (each
     array of ``host_arrays`` is computed strand by strand and vertex by vertex).  No change builds nothing; a new
     material, or more than half the guides changed, builds all; a changed guide with a zero-length edge goes to the
-    full build, whose message names it by its own index (guide 31, not the part's 6)."""
+    full build, whose message names it by its own index (guide 31, not the part's 6).  The guides built are the ones
+    ``rest_pose_edit.changed_strands`` finds (the sag-free re-solve takes them instead of comparing the hosts)."""
     from taichi_hair import RodMaterial
     from taichi_hair.groom.simulation import _host_of, guide_builder, guide_host
+    from taichi_hair.solvers.rest_pose_edit import changed_strands
 
     rng = np.random.default_rng(5)
     counts = rng.integers(5, 10, 40)
@@ -823,6 +825,7 @@ def test_an_edit_builds_only_the_guides_it_changed_and_the_host_arrays_equal_a_f
     host, materials, rebuilt = guide_host((edited, offsets), mat, (old, mat))
     full, full_materials = _host_of(guide_builder((edited, offsets), mat))
     assert np.array_equal(rebuilt, changed) and len(materials) == len(full_materials) == 40
+    assert np.array_equal(changed_strands(old, host), rebuilt)  # (what the sag-free re-solve takes it for)
     assert set(host) == set(full)
     for key in full:
         assert host[key].dtype == full[key].dtype and np.array_equal(host[key], full[key]), key
