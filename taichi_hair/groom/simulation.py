@@ -140,9 +140,7 @@ def guide_host(guide_rest, material, old=None) -> tuple[dict, list, np.ndarray |
                 try:
                     part, _ = _host_of(guide_builder((points[rows], np.concatenate([[0], np.cumsum(counts[changed])])),
                                                      material))
-                except ValueError:
-                    part = None
-                if part is None:
+                except ValueError:  # (the full build below names the guide by its own index)
                     return (*_host_of(guide_builder(guide_rest, material)), None)
                 for key, value in part.items():
                     if key not in ("vertex_strand", "strand_vertex_start"):  # (indices: the part's own)
