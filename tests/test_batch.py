@@ -148,14 +148,19 @@ seed = 2
     assert proc.returncode == 1 and "3 runs, 2 finished earlier, 1 to run" in proc.stdout, proc.stdout
 
 
-def test_a_pack_steps_its_runs_as_one_model_with_each_runs_own_frames_bit_for_bit(tmp_path):
+def test_a_pack_steps_its_runs_as_one_model_with_each_runs_own_frames_bit_for_bit(tmp_path, monkeypatch):
     """Three hang runs with other seeds, strand counts and lengths in one task (cli/simulate_pack.py): one
     Model, one solver, one compilation; each run's frames, per-frame quality columns, summary quality and
     model choice are those of the same simulate run alone (bit for bit: nothing couples strands without
-    contacts).  Runs with other solver settings are not packed: each runs alone, still right."""
+    contacts).  The pack (369 vertices) is over the size from which "auto" takes the lanes, set to 300 here, and its
+    runs (82-164) are under it: the pack keeps their strand schedule (``pack_schedule``).  Runs with other solver
+    settings are not packed: each runs alone, still right."""
+    from taichi_hair import lanes
     from taichi_hair.cli.batch import run_argv, run_pack_task, simulate_actions
     from taichi_hair.cli.main import main
     from taichi_hair.scene.batch import BatchRun
+
+    monkeypatch.setattr(lanes, "AUTO_LANES_VERTICES", 300)
 
     acts = simulate_actions()
     out = str(tmp_path / "out")
@@ -178,7 +183,9 @@ def test_a_pack_steps_its_runs_as_one_model_with_each_runs_own_frames_bit_for_bi
                                                                           for x in rb]
         sa = json.loads(open(os.path.join(solo, "summary.json")).read())
         sb = json.loads(open(os.path.join(out, r.name, "summary.json")).read())
-        assert sa["quality"] == sb["quality"] and sa["model"] == sb["model"]
+        assert sa["quality"] == sb["quality"] and sa["model"] == sb["model"] and sb["model"]["schedule"] == "strand"
+        assert sb["vertices"] < 300 < sum(json.loads(open(os.path.join(out, n.name, "summary.json")).read())["vertices"]
+                                          for n in runs)
         assert sb["pack"]["runs"] == ["a", "b", "c"] and sb["strands"] == r.options["strands"]
         assert os.path.isfile(os.path.join(out, r.name, "batch_done.json"))
     # Other iteration counts: other solver settings, so no pack; each run alone (its own frames still right).
@@ -188,6 +195,22 @@ def test_a_pack_steps_its_runs_as_one_model_with_each_runs_own_frames_bit_for_bi
     assert [r["exit_code"] for r in res] == [0, 0] and not any(r.get("packed_with") for r in res), res
     log = open(os.path.join(out, "d", "batch.log")).read()
     assert "note: not packed (PackRefused: " in log and "other solver settings" in log, log
+
+
+def test_a_pack_takes_its_runs_own_schedule_and_refuses_the_lanes_or_runs_that_disagree(monkeypatch):
+    """``cli.simulate_pack.pack_schedule``: "auto" resolves per run (``lanes.auto_schedule``), not on the pack's size;
+    runs that would take the lanes alone, or different schedules, are not packed (the lanes group strands by eight
+    across runs); an explicit schedule is kept."""
+    from taichi_hair import SolverADMMConfig, lanes
+    from taichi_hair.cli.simulate_pack import PackRefused, pack_schedule
+
+    monkeypatch.setattr(lanes, "AUTO_LANES_VERTICES", 1000)
+    assert pack_schedule(SolverADMMConfig(), [400, 900]) == "strand"
+    assert pack_schedule(SolverADMMConfig(schedule="stage"), [400, 5000]) == "stage"
+    with pytest.raises(PackRefused, match="lanes schedule steps strands in groups of eight"):
+        pack_schedule(SolverADMMConfig(), [1000, 2000])
+    with pytest.raises(PackRefused, match="alone the runs take the schedules"):
+        pack_schedule(SolverADMMConfig(), [400, 2000])
 
 
 def test_runs_that_differ_only_in_their_grooms_share_a_pack():

@@ -15,7 +15,8 @@ When (:func:`pack_refusal` says why not, and the runs then go one by one):
   each run's strands see the arithmetic of their own run and its frames are those of the run alone, bit for
   bit (tests/test_batch.py).  Two Model-wide choices are checked against each run's own after the solver is
   built: the twist unknowns dropped or solved (:func:`taichi_hair.frames.twist_choice`), and with it the
-  Anderson window;
+  Anderson window; and the schedule is each run's own (:func:`pack_schedule`: "auto" takes the lanes only for
+  large Models, and a pack is larger than its runs);
 * the authored rest pose, the same solver settings, fps, substeps, frames, gravity, body motion (sampled at
   every substep), arch and precision; no ``--equilibrium``, ``--max-error`` / ``--budget-ms``, ``--resume``
   (a run with a checkpoint resumes alone) or ``--profile``.
@@ -107,6 +108,26 @@ def pack_refusal(runs: list) -> str | None:
     return None
 
 
+def pack_schedule(config, run_vertices) -> str:
+    """The schedule of a pack's solver (``config``: the runs' SolverADMMConfig; ``run_vertices``: each run's vertex
+    count): each run's own.  ``"auto"`` resolves by Model size (``lanes.auto_schedule``) and a pack is larger than its
+    runs, so it takes what the runs take alone; they must agree, and not on the lanes, which step strands in groups of
+    eight across the runs of a pack (no longer each run's own arithmetic): :class:`PackRefused` otherwise."""
+    from ..config import Schedule, StrainMeasure, Tridiagonal
+    from ..lanes import auto_schedule
+    from ..solver_base import on_gpu
+
+    alone = {config.schedule} if config.schedule != Schedule.AUTO else {
+        auto_schedule(on_gpu(), config.tridiagonal == Tridiagonal.PCR, config.strain_measure == StrainMeasure.KORNER, n)
+        for n in run_vertices}
+    if len(alone) > 1:
+        raise PackRefused(f"alone the runs take the schedules {sorted(alone)}")
+    schedule = alone.pop()
+    if schedule == Schedule.LANES:
+        raise PackRefused("the lanes schedule steps strands in groups of eight across the runs of a pack")
+    return schedule
+
+
 class PackedSimulate:
     """Step ``runs`` (SimulateRun objects made with their args, scene and layout, Taichi initialised once) as
     one Model; :meth:`run` returns each run's exit status, or raises :class:`PackRefused` (nothing kept: the
@@ -120,8 +141,11 @@ class PackedSimulate:
         self.x = self.v = None
 
     def run(self) -> list:
+        from dataclasses import replace
+
         from .. import SimulationDivergedError
         from ..builder import GroomBuilder
+        from ..solvers import make_solver
         from ..frames import twist_choice
         from .simulate_run import SimulateRun, _atomic_text
 
@@ -129,12 +153,13 @@ class PackedSimulate:
         t = time.perf_counter()
         builders = [r.scene.builder() for r in runs]
         hosts = [b.host_arrays() for b in builders]
+        counts = [int(h["vertex_strand"].shape[0]) for h, _, _ in hosts]
+        config = replace(first.scene.solver_config, schedule=pack_schedule(first.scene.solver_config, counts))
         model = GroomBuilder.merged(builders).finalize()
         state, control = model.state(), model.control()
         control.gravity = tuple(first.scene.gravity)
-        solver = first.scene.make_solver(model)
+        solver = make_solver(first.scene.solver, model, config, colliders=first.scene.colliders)
         t_build = time.perf_counter() - t
-        counts = [int(h["vertex_strand"].shape[0]) for h, _, _ in hosts]
         starts = np.r_[0, np.cumsum(counts)]
         kappa = solver.buf.pair_rest_kappa.to_numpy()
         twist_why = []
