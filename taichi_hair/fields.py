@@ -258,9 +258,10 @@ class ContactFields:
         c, n = capacity, vertex_count
         #: Number of contacts detected at the last detection; may exceed capacity (overflow) [-], shape ().
         self.contact_count = ti.field(ti.i32, ())
-        #: Scratch of ``projection.contact_statistics``: its counts (sticking, sliding, separating, crossed, thinner than
+        #: Scratch of ``projection.contact_statistics``: its counts (sticking, sliding, separating, -, thinner than
         #: r_a + r_b) summed in a 0-D field, which Taichi reduces per thread (out[k] += 1 on a shared 1-D field was a
-        #: contended atomic per contact: 2.4-6.5 against 0.5-0.8 ms over 153k contacts, scratch probe) [-], shape ().
+        #: contended atomic per contact: 2.3-6.5 against 0.2-0.8 ms over 153k contacts, three runs of a scratch probe).
+        #: Slot 3 is unused: crossed pairs, rare, keep their atomic in ``projection._penetrations`` [-], shape ().
         self.contact_tally = ti.Vector.field(5, float, ())
         #: Vertices I_c of each contact, -1 where unused [-], shape (capacity,).
         self.contact_vertex = ti.field(ivec4, c)

@@ -12,7 +12,7 @@ from ..config import CorrectionContactOrder, MassSplitting, WeightTime
 from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, build_adjacency, count_contacts, write_contacts)
-from .projection import warn_soft_rest_lengths
+from .projection import SLAB_ORDER, SLABS, warn_soft_rest_lengths
 
 #: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial_contacts``) [-].  Measured
 #: on 2 cores (2026-12-05, bit-identical either way): the head turn (6,148 contacts) 761 -> 529 ms per frame, the
@@ -103,6 +103,9 @@ class ContactPipeline:
         #: contiguous in memory, and at least ``_SERIAL_CONTACTS`` contacts at the detection, where the thread pool's
         #: dispatches pay).
         self._slabs = False
+        #: How the slab groups sweep: on Taichi's threads (``projection.SLABS``) where it has more than
+        #: ``_SLAB_THREADS``, else in the same order on the launching thread (``SLAB_ORDER``, the same bits).
+        self._slab_sweep = SLABS if ti.lang.impl.current_cfg().cpu_max_num_threads > _SLAB_THREADS else SLAB_ORDER
         #: The last quasistatic step's contact impulses for the next detection (``contact.warm``; allocated at the
         #: first quasistatic step, so dynamic runs never allocate them), and whether they belong to this model.
         self._warm, self._warm_valid = None, False
@@ -186,7 +189,7 @@ class ContactPipeline:
         """Whether a sweep of this step may run in the paper's 8 batches (the z-step's ``projection_contact_order``,
         the correction's ``correction_contact_order``; "auto": batches on a GPU, and on the CPU in the dynamic mode
         for the z-step), so the entry coefficients they read must be stored (``narrow.store_entry_coefficients``)."""
-        from .projection import SEQUENTIAL, SLAB_ORDER, SLABS
+        from .projection import SEQUENTIAL
 
         return not {self._projection_order(dynamic), self._correction_order()} <= {SEQUENTIAL, SLABS, SLAB_ORDER}
 
@@ -204,14 +207,12 @@ class ContactPipeline:
         order where the contacts are few), their groups on several threads only where Taichi has more than
         ``_SLAB_THREADS`` (else the same order on one: the same bits); otherwise the batches (on the launching thread
         where they are few)."""
-        from .projection import SEQUENTIAL, SLAB_ORDER, SLABS
+        from .projection import SEQUENTIAL
 
         if order == CorrectionContactOrder.SEQUENTIAL:
             return SEQUENTIAL
         if order == CorrectionContactOrder.AUTO and auto_one_by_one:
-            if not self._slabs:
-                return SEQUENTIAL
-            return SLABS if ti.lang.impl.current_cfg().cpu_max_num_threads > _SLAB_THREADS else SLAB_ORDER
+            return self._slab_sweep if self._slabs else SEQUENTIAL
         return self._serial_contacts
 
     @property
@@ -306,8 +307,6 @@ class ContactPipeline:
                           f"growing it to {new_cap} and detecting again (no contact dropped)", stacklevel=3)
             self.con = ContactFields(new_cap, m.vertex_count)
             self.grow_events += 1
-        from .projection import SLAB_ORDER, SLABS
-
         self._slabs = (not on_gpu()) and total >= _SERIAL_CONTACTS and self.slabs_contiguous
         self._slabs = self._slabs and bool({SLABS, SLAB_ORDER} & {self._projection_order(dynamic), self._correction_order()})
         if self._slabs:

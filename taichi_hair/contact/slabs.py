@@ -32,7 +32,8 @@ slabs came out as descending runs (the axis's sign, see :func:`principal_axis_or
 them; re-measured after the fix in one process (``benchmarks/probes/slab_sweeps.py``): a sweep 0.92-1.12x the
 time of the same contacts one by one, a still step 1.04-1.08x, within this VM's drift.  After the sweeps one by one
 got cheaper (2026-12-06) the phases on 2 threads took 1.4x the time of the same groups in the same order on one
-(``projection.SLAB_ORDER``, the same bits), which is what a CPU with up to 2 threads now runs
+in two of three probe runs, the same time in the third (``projection.SLAB_ORDER``, the same bits), which is what a CPU
+with up to 2 threads now runs
 (``pipeline._SLAB_THREADS``): the grouping stays for its order and its locality.
 """
 
