@@ -36,14 +36,12 @@ v = (x - x_hat) / h.  The dissipative terms use the same BDF2 rate:
     c (kappa - kappa_begin) with c = tau * damping_scale, damping_scale = 1 / h (1 / dt for
     backward Euler).  Damping stays second-order consistent, so a damped rod converges at
     second order too.
-x_{n-1}, v_{n-1}, theta_{n-1}, omega_{n-1} are the begin buffers of the last step
-(read by ``begin_step`` before it overwrites them); kappa_{n-1}, eps_{n-1} sit in
-``pair_kappa_previous``/``edge_strain_previous``.  A step without that history
--- the first one, one after ``reset_history``/``reset_duals`` or ``restore`` of a
-checkpoint without it, after a failed step, or with another dt -- is a backward
-Euler step (it then makes the history).  The contact weights W_z and the
-detection margins keep the physical dt (they set ADMM's convergence and the
-reach of a step, not the discretisation).
+x_{n-1}, v_{n-1}, theta_{n-1}, omega_{n-1} are the begin buffers of the last step (read by ``begin_step`` before it
+overwrites them); kappa_{n-1}, eps_{n-1} sit in ``pair_kappa_previous``/``edge_strain_previous``.  A step without
+that history -- the first one, one after ``reset_history``/``reset_duals`` or ``restore`` of a checkpoint without
+it, after a failed step, or with another dt -- is a backward Euler step (it then makes the history).  The contact
+weights W_z and the detection margins keep the physical dt (they set ADMM's convergence and the reach of a step,
+not the discretisation).
 
 With contacts the strand schedule runs one iteration per launch, the z-step
 between launches (it couples strands); y and z both depend on x only, so
@@ -69,7 +67,8 @@ from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_l
 from .fields import SolverBuffers
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
-from .lanes import CONTACT_ITERATION, ITERATIONS, LaneLayout, admm_iterations_lanes, auto_schedule, lanes_gather, lanes_scatter
+from .lanes import (CONTACT_ITERATION, ITERATIONS, LaneLayout, admm_iterations_lanes, auto_schedule, lanes_frames, lanes_gather,
+                    lanes_scatter)
 from .schedule_strand import admm_iterations_strand
 from .state import Control, State
 from .strains import BERGOU, KORNER
@@ -109,9 +108,8 @@ class SolverADMM(SolverBase):
         if cfg.mode == Mode.QUASISTATIC:
             free = np.where(h["strand_body"] < 0)[0]
             if free.size:
-                raise ValueError(
-                    f"strand {int(free[0])}: field 'root' is 'free', but the quasistatic mode needs every strand "
-                    "clamped (a free strand has no equilibrium under gravity)")
+                raise ValueError(f"strand {int(free[0])}: field 'root' is 'free', but the quasistatic mode needs every "
+                                 "strand clamped (a free strand has no equilibrium under gravity)")
         self.dynamic = cfg.mode == Mode.DYNAMIC
         self.measure = KORNER if cfg.strain_measure == StrainMeasure.KORNER else BERGOU
         self.with_ref_twist = self.measure == BERGOU
@@ -302,7 +300,8 @@ class SolverADMM(SolverBase):
         if not cfg.warm_start_duals:
             admm.reset_duals(b)
         t0 = self._tock("begin", t0)
-        self._update_frames(state, control)
+        if self._lanes is None or self._anderson_on():  # (the lanes move their own: lanes_frames after the gather)
+            self._update_frames(state, control)
         t0 = self._tock("frames", t0)
 
         if self.schedule == Schedule.STAGE:
@@ -360,6 +359,7 @@ class SolverADMM(SolverBase):
 
         if lanes is not None:
             lanes_gather(lanes, m, control.body_rotation, x, theta, state, b, damping_scale, weight_floor)
+            lanes_frames(self.twist_free, lanes)
         if con is None:
             launch(cfg.iterations, ITERATIONS)  # (a-g) for every iteration in one kernel
             self.iteration_count += cfg.iterations

@@ -3,10 +3,10 @@ stage), :mod:`.layout` (the lane layout, gathers, scatters and lane arithmetic).
 
 from ..config import Schedule
 from .layout import LANES, LaneLayout
-from .schedule import CONTACT_ITERATION, ITERATIONS, admm_iterations_lanes, lanes_gather, lanes_scatter
+from .schedule import CONTACT_ITERATION, ITERATIONS, admm_iterations_lanes, lanes_frames, lanes_gather, lanes_scatter
 
 __all__ = ["AUTO_LANES_VERTICES", "CONTACT_ITERATION", "ITERATIONS", "LANES", "LaneLayout", "admm_iterations_lanes",
-           "auto_schedule", "lanes_gather", "lanes_scatter"]
+           "auto_schedule", "lanes_frames", "lanes_gather", "lanes_scatter"]
 
 #: Vertices from which ``SolverADMMConfig.schedule = "auto"`` runs the lanes on a CPU [-].  The lanes were faster at
 #: every size measured (``simulate hang`` 300 strands: 57.9 against 171 ms per frame; the grooming benchmark's 8,600

@@ -10,10 +10,15 @@ gain is gone (the same probe's ``gather_8``).  So this schedule works on a secon
 * the strands are grouped by eight of one vertex count (:class:`LaneLayout`; the last group of a count is
   padded with copies of its first strand, whose results are dropped);
 * each step, :func:`lanes_gather` copies every group's constants and state into its lane rows (one row per local
-  vertex index, each value a vector of the eight strands'), :func:`admm_iterations_lanes` (one parallel loop over
-  groups) runs the iterations on them, and :func:`lanes_scatter` copies the state back: the gathers are paid once
-  per step, not per stage.  With contacts the iterations run one launch at a time, the z-step between them; each
-  launch takes in only the z-step's weights and targets and gives back only x.
+  vertex index, each value a vector of the eight strands'), :func:`lanes_frames` moves the frames to the step's
+  first iterate, :func:`admm_iterations_lanes` (one parallel loop over groups) runs the iterations on them, and
+  :func:`lanes_scatter` copies the state back: the gathers are paid once per step, not per stage.  With contacts
+  the iterations run one launch at a time, the z-step between them; each launch takes in only the z-step's
+  weights and targets and gives back only x.
+* what does not change over a launch's iterations is computed once per launch, before them: the positions'
+  tridiagonal matrix, factored (:func:`_factor_positions`; the weights, masses and z-step weights are constant
+  there), and the local step's divisions by the rest lengths and stiffnesses (:func:`_local_constants`).  sin and
+  cos are a polynomial on lanes (``layout.sincos``: Taichi's own call the scalar libm once per lane).
 
 The iteration is Algorithm 1's steps (a)-(g) as in the strand schedule, stage for stage, for the Korner
 measure (the default) with the twist solved or the twist-free frames; each function below names the ``*_at``
@@ -58,6 +63,20 @@ def _pair_frame(L: ti.template(), r):
 
 
 @ti.func
+def _local_constants(L: ti.template(), g, r, k, m):
+    """Row r's (local index k of m) constants of the local step over a launch: its edge's 1 / l^2 and, for a pair,
+    the diagonal w / ((1 + c) k) of w E^-1 (``strains.proximal_step5``; capped at 1e30 where a stiffness is 0)."""
+    L.lane_inverse_rest_length2[r] = 1.0 / (L.lane_rest_length[r] * L.lane_rest_length[r])
+    if 0 < k < m - 1:
+        w = L.lane_pair_weight[r]
+        one_c = 1.0 + L.group_damping[g]
+        for c in ti.static(range(3)):
+            L.lane_pair_compliance[r, c] = ti.min(w / (one_c * L.lane_bend_stiffness[r, c]), 1e30)
+        L.lane_pair_compliance[r, 3] = ti.min(w / (one_c * L.lane_stretch_stiffness[r - 1]), 1e30)
+        L.lane_pair_compliance[r, 4] = ti.min(w / (one_c * L.lane_stretch_stiffness[r]), 1e30)
+
+
+@ti.func
 def _local_elasticity(L: ti.template(), use_q: ti.template(), g, r):
     """``elasticity.local_elasticity_at`` of pair row r (Korner measure): one Gauss-Newton step of Eq. (4) by the
     5x5 Woodbury form (``strains.proximal_step5``), the fused dual update and the pair's force."""
@@ -92,12 +111,10 @@ def _local_elasticity(L: ti.template(), use_q: ti.template(), g, r):
             J[row][c] = -(ma0 * Aa[0][c] + ma1 * Aa[1][c])
             J[row][c + 3] = mb0 * Ab[0][c] + mb1 * Ab[1][c]
     c_damp = L.group_damping[g]
-    one_c = 1.0 + c_damp
+    inv_one_c = 1.0 / (1.0 + c_damp)
     # Stretch strains (Korner: eps = (|e|^2 / l^2 - 1) / 2, grad e / l^2; strains.stretch_strain).
-    la = L.lane_rest_length[a]
-    lb = L.lane_rest_length[r]
-    inv_a = 1.0 / (la * la)
-    inv_b = 1.0 / (lb * lb)
+    inv_a = L.lane_inverse_rest_length2[a]
+    inv_b = L.lane_inverse_rest_length2[r]
     eps_a = 0.5 * (dot(ea, ea) * inv_a - 1.0)
     eps_b = 0.5 * (dot(eb, eb) * inv_b - 1.0)
     ga = scale(inv_a, ea)
@@ -111,15 +128,10 @@ def _local_elasticity(L: ti.template(), use_q: ti.template(), g, r):
     lb3 = matvec(Q, [lam_q[3], lam_q[4], lam_q[5]])
     lam = [la3[0], la3[1], la3[2], lb3[0], lb3[1], lb3[2]]
     f = [V8(0.0) for _ in ti.static(range(5))]
-    wie = [V8(0.0) for _ in ti.static(range(5))]
     for c in ti.static(range(3)):
-        k_c = L.lane_bend_stiffness[r, c]
-        f[c] = ((kappa[c] - L.lane_rest_kappa[r, c]) + c_damp * (kappa[c] - L.lane_kappa_begin[r, c])) / one_c
-        wie[c] = ti.min(w / (one_c * k_c), 1e30)
-    f[3] = (eps_a + c_damp * (eps_a - L.lane_strain_begin[a])) / one_c
-    f[4] = (eps_b + c_damp * (eps_b - L.lane_strain_begin[r])) / one_c
-    wie[3] = ti.min(w / (one_c * L.lane_stretch_stiffness[a]), 1e30)
-    wie[4] = ti.min(w / (one_c * L.lane_stretch_stiffness[r]), 1e30)
+        f[c] = ((kappa[c] - L.lane_rest_kappa[r, c]) + c_damp * (kappa[c] - L.lane_kappa_begin[r, c])) * inv_one_c
+    f[3] = (eps_a + c_damp * (eps_a - L.lane_strain_begin[a])) * inv_one_c
+    f[4] = (eps_b + c_damp * (eps_b - L.lane_strain_begin[r])) * inv_one_c
     # proximal_step5: P = w E^-1 + V^T V (5x5, P[3, 4] = 0), t = V^T lam - f; LDL^T; delta = -lam + V q.
     P = [[V8(0.0) for _ in ti.static(range(5))] for _ in ti.static(range(5))]
     t = [V8(0.0) for _ in ti.static(range(5))]
@@ -145,19 +157,21 @@ def _local_elasticity(L: ti.template(), use_q: ti.template(), g, r):
     t[3] = ga[0] * lam[0] + ga[1] * lam[1] + ga[2] * lam[2] - f[3]
     t[4] = gb[0] * lam[3] + gb[1] * lam[4] + gb[2] * lam[5] - f[4]
     for d in ti.static(range(5)):
-        P[d][d] = P[d][d] + wie[d]
+        P[d][d] = P[d][d] + L.lane_pair_compliance[r, d]
     Lm = [[V8(0.0) for _ in ti.static(range(5))] for _ in ti.static(range(5))]
     D = [V8(0.0) for _ in ti.static(range(5))]
+    D_inv = [V8(0.0) for _ in ti.static(range(5))]
     for j in ti.static(range(5)):
         s = P[j][j]
         for k in ti.static(range(j)):
             s = s - Lm[j][k] * Lm[j][k] * D[k]
         D[j] = s
+        D_inv[j] = 1.0 / s
         for i2 in ti.static(range(j + 1, 5)):
             u = P[i2][j]
             for k in ti.static(range(j)):
                 u = u - Lm[i2][k] * Lm[j][k] * D[k]
-            Lm[i2][j] = u / s
+            Lm[i2][j] = u * D_inv[j]
     y = [V8(0.0) for _ in ti.static(range(5))]
     for i2 in ti.static(range(5)):
         s = t[i2]
@@ -166,7 +180,7 @@ def _local_elasticity(L: ti.template(), use_q: ti.template(), g, r):
         y[i2] = s
     q = [V8(0.0) for _ in ti.static(range(5))]
     for i2 in ti.static(range(4, -1, -1)):
-        s = y[i2] / D[i2]
+        s = y[i2] * D_inv[i2]
         for k in ti.static(range(i2 + 1, 5)):
             s = s - Lm[k][i2] * q[k]
         q[i2] = s
@@ -188,25 +202,17 @@ def _local_elasticity(L: ti.template(), use_q: ti.template(), g, r):
 
 
 @ti.func
-def _assemble_position(L: ti.template(), dynamic: ti.template(), r, k, m, gravity: vec3, air_velocity: vec3,
-                       air_viscosity: float, dt: float):
-    """``admm.assemble_position_at`` of row r (local index k of m), on lanes."""
+def _position_matrix(L: ti.template(), dynamic: ti.template(), r, k, m, air_viscosity: float, dt: float):
+    """The matrix half of ``admm.assemble_position_at`` for row r (local index k of m), on lanes: the rows of
+    M/dt^2 + (air) + B^T W B + W_z + W_attach, written to ``lane_position_lower`` / ``_inverse_pivot`` (the diagonal,
+    until :func:`_factor_positions`) / ``_ratio`` (the upper entry, until then).  Constant over a launch's
+    iterations: the weights, masses, fixed vertices and the z-step's weights do not change between them."""
     fixed = L.lane_vertex_fixed[r] != 0
-    mass = L.lane_mass[r]
-    x = load3(L.lane_position, r)
     diag = V8(0.0)
-    f = [mass * gravity[c] for c in ti.static(range(3))]
     if ti.static(dynamic):
         inv_dt = 1.0 / dt
-        diag += mass * inv_dt * inv_dt
-        xo = load3(L.lane_position_origin, r)
-        vo = load3(L.lane_velocity_origin, r)
-        xi = air_viscosity * L.lane_voronoi[r]
-        diag += xi * inv_dt
-        for c in ti.static(range(3)):
-            x_pred = xo[c] + dt * vo[c]
-            f[c] = f[c] - mass * inv_dt * inv_dt * (x[c] - x_pred)
-            f[c] = f[c] - xi * ((x[c] - xo[c]) * inv_dt - air_velocity[c])
+        diag += L.lane_mass[r] * inv_dt * inv_dt
+        diag += air_viscosity * L.lane_voronoi[r] * inv_dt
     # The rows before and after (k > 0, k < m - 1), read at a valid row and masked where absent.
     has_prev = k > 0
     has_next = k < m - 1
@@ -220,6 +226,51 @@ def _assemble_position(L: ti.template(), dynamic: ti.template(), r, k, m, gravit
     we_next = w_own + L.lane_pair_weight[rn] * ti.cast(L.lane_pair_active[rn], ti.f32)
     diag += ti.select(real_edge, we_next, 0.0)
     upper = ti.select(real_edge & (L.lane_vertex_fixed[rn] == 0), -we_next, 0.0)
+    diag += L.lane_contact_weight[r]
+    diag += L.lane_attach_weight[r]
+    L.lane_position_lower[r] = ti.select(fixed, 0.0, lower)
+    L.lane_position_inverse_pivot[r] = ti.select(fixed, 1.0, diag)
+    L.lane_position_ratio[r] = ti.select(fixed, 0.0, upper)
+
+
+@ti.func
+def _factor_positions(L: ti.template(), r0, m):
+    """The forward elimination of ``tridiag.thomas_strand`` on the matrix alone (once per launch): the pivots'
+    inverses and the ratios c'_k = upper_k / pivot_k, in place of the diagonal and the upper entries."""
+    inv = 1.0 / L.lane_position_inverse_pivot[r0]
+    cp = L.lane_position_ratio[r0] * inv
+    L.lane_position_inverse_pivot[r0] = inv
+    L.lane_position_ratio[r0] = cp
+    for k in range(1, m):
+        r = r0 + k
+        inv_k = 1.0 / (L.lane_position_inverse_pivot[r] - L.lane_position_lower[r] * cp)
+        cp = L.lane_position_ratio[r] * inv_k
+        L.lane_position_inverse_pivot[r] = inv_k
+        L.lane_position_ratio[r] = cp
+
+
+@ti.func
+def _position_rhs(L: ti.template(), dynamic: ti.template(), r, k, m, gravity: vec3, air_velocity: vec3,
+                  air_viscosity: float, dt: float):
+    """The right-hand side of ``admm.assemble_position_at`` for row r (local index k of m), on lanes."""
+    fixed = L.lane_vertex_fixed[r] != 0
+    mass = L.lane_mass[r]
+    x = load3(L.lane_position, r)
+    f = [mass * gravity[c] for c in ti.static(range(3))]
+    if ti.static(dynamic):
+        inv_dt = 1.0 / dt
+        xo = load3(L.lane_position_origin, r)
+        vo = load3(L.lane_velocity_origin, r)
+        xi = air_viscosity * L.lane_voronoi[r]
+        for c in ti.static(range(3)):
+            x_pred = xo[c] + dt * vo[c]
+            f[c] = f[c] - mass * inv_dt * inv_dt * (x[c] - x_pred)
+            f[c] = f[c] - xi * ((x[c] - xo[c]) * inv_dt - air_velocity[c])
+    has_prev = k > 0
+    has_next = k < m - 1
+    rp = ti.select(has_prev, r - 1, r)
+    rn = ti.select(has_next, r + 1, r)
+    real_edge = has_next & (L.lane_rest_length[r] > 0.0)
     # B^T r: ra_i - rb_i of the own pair, rb_{i-1}, -ra_{i+1} (zero where absent: adding 0 changes no bit).
     for c in ti.static(range(3)):
         f[c] = f[c] + (L.lane_force[r, c] - L.lane_force[r, c + 3])
@@ -227,34 +278,56 @@ def _assemble_position(L: ti.template(), dynamic: ti.template(), r, k, m, gravit
         f[c] = f[c] - ti.select(real_edge, L.lane_force[rn, c], 0.0)
     # Collision constraint (W_z (z + lambda_z - x)) and attachment (k (target - x)), zero without them.
     w_z = L.lane_contact_weight[r]
-    diag += w_z
     for c in ti.static(range(3)):
         f[c] = f[c] + w_z * (L.lane_contact_target[r, c] - x[c])
     w_a = L.lane_attach_weight[r]
-    diag += w_a
     for c in ti.static(range(3)):
         f[c] = f[c] + w_a * (L.lane_attach_target[r, c] - x[c])
-    L.lane_lower[r] = ti.select(fixed, 0.0, lower)
-    L.lane_diag[r] = ti.select(fixed, 1.0, diag)
-    L.lane_upper[r] = ti.select(fixed, 0.0, upper)
     for c in ti.static(range(3)):
         L.lane_rhs[r, c] = ti.select(fixed, 0.0, f[c])
 
 
 @ti.func
-def _thomas(L: ti.template(), r0, m, n_rhs: ti.template()):
-    """``tridiag.thomas_strand`` on lanes, ``n_rhs`` right-hand sides (columns of ``lane_rhs``)."""
+def _solve_positions(L: ti.template(), r0, m):
+    """``tridiag.thomas_strand``'s substitutions with the factored matrix (:func:`_factor_positions`), the three
+    columns of ``lane_rhs`` (the position increments)."""
+    inv = L.lane_position_inverse_pivot[r0]
+    d0 = L.lane_rhs[r0, 0] * inv
+    d1 = L.lane_rhs[r0, 1] * inv
+    d2 = L.lane_rhs[r0, 2] * inv
+    L.lane_rhs[r0, 0] = d0
+    L.lane_rhs[r0, 1] = d1
+    L.lane_rhs[r0, 2] = d2
+    for k in range(1, m):
+        r = r0 + k
+        low = L.lane_position_lower[r]
+        inv_k = L.lane_position_inverse_pivot[r]
+        d0 = (L.lane_rhs[r, 0] - low * d0) * inv_k
+        d1 = (L.lane_rhs[r, 1] - low * d1) * inv_k
+        d2 = (L.lane_rhs[r, 2] - low * d2) * inv_k
+        L.lane_rhs[r, 0] = d0
+        L.lane_rhs[r, 1] = d1
+        L.lane_rhs[r, 2] = d2
+    for kk in range(1, m):
+        r = r0 + m - 1 - kk
+        cp = L.lane_position_ratio[r]
+        d0 = L.lane_rhs[r, 0] - cp * d0
+        d1 = L.lane_rhs[r, 1] - cp * d1
+        d2 = L.lane_rhs[r, 2] - cp * d2
+        L.lane_rhs[r, 0] = d0
+        L.lane_rhs[r, 1] = d1
+        L.lane_rhs[r, 2] = d2
+
+
+@ti.func
+def _thomas(L: ti.template(), r0, m):
+    """``tridiag.thomas_strand`` on lanes, one right-hand side (column 0 of ``lane_rhs``: the twist step, whose
+    matrix changes every iteration)."""
     inv = 1.0 / L.lane_diag[r0]
     cp = L.lane_upper[r0] * inv
     L.lane_upper[r0] = cp
-    # The carried d' of each column (columns 1 and 2: the positions' y and z only).
-    d0, d1, d2 = L.lane_rhs[r0, 0] * inv, V8(0.0), V8(0.0)
+    d0 = L.lane_rhs[r0, 0] * inv
     L.lane_rhs[r0, 0] = d0
-    if ti.static(n_rhs == 3):
-        d1 = L.lane_rhs[r0, 1] * inv
-        d2 = L.lane_rhs[r0, 2] * inv
-        L.lane_rhs[r0, 1] = d1
-        L.lane_rhs[r0, 2] = d2
     for k in range(1, m):
         r = r0 + k
         low = L.lane_lower[r]
@@ -263,21 +336,10 @@ def _thomas(L: ti.template(), r0, m, n_rhs: ti.template()):
         L.lane_upper[r] = cp
         d0 = (L.lane_rhs[r, 0] - low * d0) * inv_k
         L.lane_rhs[r, 0] = d0
-        if ti.static(n_rhs == 3):
-            d1 = (L.lane_rhs[r, 1] - low * d1) * inv_k
-            d2 = (L.lane_rhs[r, 2] - low * d2) * inv_k
-            L.lane_rhs[r, 1] = d1
-            L.lane_rhs[r, 2] = d2
     for kk in range(1, m):
         r = r0 + m - 1 - kk
-        up = L.lane_upper[r]
-        d0 = L.lane_rhs[r, 0] - up * d0
+        d0 = L.lane_rhs[r, 0] - L.lane_upper[r] * d0
         L.lane_rhs[r, 0] = d0
-        if ti.static(n_rhs == 3):
-            d1 = L.lane_rhs[r, 1] - up * d1
-            d2 = L.lane_rhs[r, 2] - up * d2
-            L.lane_rhs[r, 1] = d1
-            L.lane_rhs[r, 2] = d2
 
 
 @ti.func
@@ -412,14 +474,19 @@ def admm_iterations_lanes(
             gather_targets(L, g, buf)
         r0 = L.group_row_start[g]
         m = L.group_vertex_count[g]
+        # The launch's constants: the local step's, and the global step's matrix, factored once.
+        for k in range(m):
+            _local_constants(L, g, r0 + k, k, m)
+            _position_matrix(L, dynamic, r0 + k, k, m, air_viscosity, dt)
+        _factor_positions(L, r0, m)
         for _it in range(iterations):
             # (a, c) Local step and fused dual update, every pair.
             for k in range(1, m - 1):
                 _local_elasticity(L, use_q, g, r0 + k)
-            # (d) Global step: assemble, Thomas, x += dx on free vertices.
+            # (d) Global step: the right-hand side, the factored matrix's substitutions, x += dx on free vertices.
             for k in range(m):
-                _assemble_position(L, dynamic, r0 + k, k, m, gravity, air_velocity, air_viscosity, dt)
-            _thomas(L, r0, m, 3)
+                _position_rhs(L, dynamic, r0 + k, k, m, gravity, air_velocity, air_viscosity, dt)
+            _solve_positions(L, r0, m)
             for k in range(m):
                 r = r0 + k
                 free = L.lane_vertex_fixed[r] == 0
@@ -437,7 +504,7 @@ def admm_iterations_lanes(
                     _pair_twist_terms(L, g, r0 + k)
                 for k in range(m):
                     _assemble_twist(L, dynamic, r0 + k, k, m, dt)
-                _thomas(L, r0, m, 1)
+                _thomas(L, r0, m)
                 # (g) theta += dtheta on free edges, material frames of the real edges.
                 for k in range(m):
                     r = r0 + k
@@ -459,6 +526,21 @@ def lanes_gather(L: ti.template(), model: ti.template(), body_rotation: ti.templ
     """Every group's constants and state into the lanes (the beginning of a step with contacts)."""
     for g in L.group_vertex_count:
         gather(L, g, model, body_rotation, x, theta, es, buf, damping_scale, weight_floor)
+
+
+@ti.kernel
+def lanes_frames(twist_free: ti.template(), L: ti.template()):
+    """The frames at the step's first iterate, on the gathered lanes (after :func:`lanes_gather`): the reference frames
+    parallel-transported to the new tangents, then the material frames (or the twist-free frames), as the
+    iterations' stage (e) does.  The step's frame update in the strands' layout (``SolverADMM._update_frames``, scalar
+    sin and cos) is skipped where the lanes run."""
+    for g in L.group_vertex_count:
+        r0 = L.group_row_start[g]
+        m = L.group_vertex_count[g]
+        for k in range(m - 1):
+            _reference_frame(L, g, r0 + k, k)
+        if ti.static(twist_free):
+            _twist_free(L, r0, m)
 
 
 @ti.kernel
