@@ -15,10 +15,11 @@ gain is gone (the same probe's ``gather_8``).  So this schedule works on a secon
   :func:`lanes_scatter` copies the state back: the gathers are paid once per step, not per stage.  With contacts
   the iterations run one launch at a time, the z-step between them; each launch takes in only the z-step's
   weights and targets and gives back only x.
-* what does not change over a launch's iterations is computed once per launch, before them: the positions'
-  tridiagonal matrix, factored (:func:`_factor_positions`; the weights, masses and z-step weights are constant
-  there), and the local step's divisions by the rest lengths and stiffnesses (:func:`_local_constants`).  sin and
-  cos are a polynomial on lanes (``layout.sincos``: Taichi's own call the scalar libm once per lane).
+* what does not change over the iterations is computed before them: the positions' tridiagonal matrix, factored
+  once per launch (:func:`_factor_positions`; the weights, masses and z-step weights are constant there), and the
+  local step's divisions by the rest lengths and stiffnesses once per step (:func:`_local_constants`, in
+  :func:`lanes_frames`).  sin and cos are a polynomial on lanes (``layout.sincos``: Taichi's own call the scalar
+  libm once per lane).
 
 The iteration is Algorithm 1's steps (a)-(g) as in the strand schedule, stage for stage, for the Korner
 measure (the default) with the twist solved or the twist-free frames; each function below names the ``*_at``
@@ -474,9 +475,8 @@ def admm_iterations_lanes(
             gather_targets(L, g, buf)
         r0 = L.group_row_start[g]
         m = L.group_vertex_count[g]
-        # The launch's constants: the local step's, and the global step's matrix, factored once.
+        # The global step's matrix, factored once for the launch (the local step's constants: lanes_frames).
         for k in range(m):
-            _local_constants(L, g, r0 + k, k, m)
             _position_matrix(L, dynamic, r0 + k, k, m, air_viscosity, dt)
         _factor_positions(L, r0, m)
         for _it in range(iterations):
@@ -533,10 +533,13 @@ def lanes_frames(twist_free: ti.template(), L: ti.template()):
     """The frames at the step's first iterate, on the gathered lanes (after :func:`lanes_gather`): the reference frames
     parallel-transported to the new tangents, then the material frames (or the twist-free frames), as the
     iterations' stage (e) does.  The step's frame update in the strands' layout (``SolverADMM._update_frames``, scalar
-    sin and cos) is skipped where the lanes run."""
+    sin and cos) is skipped where the lanes run.  Also the local step's constants of the step
+    (:func:`_local_constants`), once per step: a step with contacts launches the iterations one at a time."""
     for g in L.group_vertex_count:
         r0 = L.group_row_start[g]
         m = L.group_vertex_count[g]
+        for k in range(m):
+            _local_constants(L, g, r0 + k, k, m)
         for k in range(m - 1):
             _reference_frame(L, g, r0 + k, k)
         if ti.static(twist_free):
