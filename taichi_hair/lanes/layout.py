@@ -8,6 +8,7 @@ LANES = 8
 V8 = ti.types.vector(LANES, ti.f32)
 I8 = ti.types.vector(LANES, ti.i32)
 vec3 = ti.math.vec3
+vec6 = ti.types.vector(6, float)
 
 
 # =========================================================================== lane arithmetic
@@ -346,10 +347,6 @@ def scatter(L: ti.template(), g, x: ti.template(), theta: ti.template(), es: ti.
                 es.edge_reference_director[i] = lane_vec3(L.lane_reference, r, q)
                 es.edge_material_d1[i] = lane_vec3(L.lane_d1, r, q)
                 es.edge_material_d2[i] = lane_vec3(L.lane_d2, r, q)
-                d = buf.pair_dual[i]
-                f = buf.pair_force[i]
-                for c in ti.static(range(6)):
-                    d[c] = L.lane_dual[r, c][q]
-                    f[c] = L.lane_force[r, c][q]
-                buf.pair_dual[i] = d
-                buf.pair_force[i] = f
+                # Built from the lanes alone (a read-modify-write of the six components read 12 values for nothing).
+                buf.pair_dual[i] = vec6([L.lane_dual[r, c][q] for c in ti.static(range(6))])
+                buf.pair_force[i] = vec6([L.lane_force[r, c][q] for c in ti.static(range(6))])
