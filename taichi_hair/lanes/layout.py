@@ -113,10 +113,9 @@ def sincos(theta):
 
 
 @ti.func
-def material_frame(d1, t, theta):
-    """``strains.material_frame`` on lanes (sin and cos by :func:`sincos`)."""
+def material_frame(d1, t, s, c):
+    """``strains.material_frame`` on lanes, given s = sin(theta) and c = cos(theta) (:func:`sincos`)."""
     d2 = cross(t, d1)
-    s, c = sincos(theta)
     return add(scale(c, d1), scale(s, d2)), add(scale(-s, d1), scale(c, d2))
 
 
@@ -195,6 +194,10 @@ class LaneLayout:
         # --- per lane row: state and working values
         self.lane_position = ti.field(V8, (R, 3))         #: x [m]
         self.lane_twist = ti.field(V8, R)                 #: theta [rad]
+        #: sin and cos of theta, computed where theta changes (``lanes_frames``, the twist step) and read by the frames
+        #: of the next iteration [-].
+        self.lane_twist_sin = ti.field(V8, R)
+        self.lane_twist_cos = ti.field(V8, R)
         self.lane_tangent = ti.field(V8, (R, 3))          #: edge_tangent [-]
         self.lane_reference = ti.field(V8, (R, 3))        #: edge_reference_director [-]
         self.lane_d1 = ti.field(V8, (R, 3))               #: edge_material_d1 [-]

@@ -36,7 +36,7 @@ import taichi as ti
 
 from ..elasticity import FRAME_PAIR, FRAME_ROOT
 from .layout import (V8, cross, dot, gather, gather_targets, load3, material_frame, matvec, matvec_t, normalized,
-                     parallel_transport, scale, scatter, scatter_positions, select3, store3, sub)
+                     parallel_transport, scale, scatter, scatter_positions, select3, sincos, store3, sub)
 
 vec3 = ti.math.vec3
 
@@ -344,8 +344,10 @@ def _thomas(L: ti.template(), r0, m):
 
 
 @ti.func
-def _reference_frame(L: ti.template(), g, r, k):
-    """``frames.reference_frame_at`` of edge row r (local index k), on lanes (real edges only)."""
+def _reference_frame(L: ti.template(), g, r, k, new_twist: ti.template()):
+    """``frames.reference_frame_at`` of edge row r (local index k), on lanes (real edges only).  ``new_twist``
+    (compile-time): theta changed since its sin and cos were stored (the step's start: compute and store them), or not
+    (the iterations' stage (e): the twist step of the iteration before stored them)."""
     x0, x1 = load3(L.lane_position, r), load3(L.lane_position, r + 1)
     t_new = normalized(sub(x1, x0))
     moved = parallel_transport(load3(L.lane_reference, r), load3(L.lane_tangent, r), t_new)
@@ -353,7 +355,11 @@ def _reference_frame(L: ti.template(), g, r, k):
     root = matvec(_group_rotation(L, g), [L.group_root_director[g, c] for c in ti.static(range(3))])
     d1_raw = select3((L.group_has_body[g] != 0) & (k == 0), root, moved)
     d1 = normalized(sub(d1_raw, scale(dot(d1_raw, t_new), t_new)))
-    m1, m2 = material_frame(d1, t_new, L.lane_twist[r])
+    if ti.static(new_twist):
+        sin_t, cos_t = sincos(L.lane_twist[r])
+        L.lane_twist_sin[r] = sin_t
+        L.lane_twist_cos[r] = cos_t
+    m1, m2 = material_frame(d1, t_new, L.lane_twist_sin[r], L.lane_twist_cos[r])
     real = L.lane_rest_length[r] > 0.0
     store3(L.lane_tangent, r, select3(real, t_new, load3(L.lane_tangent, r)))
     store3(L.lane_reference, r, select3(real, d1, load3(L.lane_reference, r)))
@@ -495,7 +501,7 @@ def admm_iterations_lanes(
                                                       L.lane_position[r, c])
             # (e) Frames of the real edges.
             for k in range(m - 1):
-                _reference_frame(L, g, r0 + k, k)
+                _reference_frame(L, g, r0 + k, k, False)
             if ti.static(twist_free):
                 _twist_free(L, r0, m)
             else:
@@ -512,7 +518,10 @@ def admm_iterations_lanes(
                                                 L.lane_twist[r])
                 for k in range(m - 1):
                     r = r0 + k
-                    m1, m2 = material_frame(load3(L.lane_reference, r), load3(L.lane_tangent, r), L.lane_twist[r])
+                    sin_t, cos_t = sincos(L.lane_twist[r])
+                    L.lane_twist_sin[r] = sin_t
+                    L.lane_twist_cos[r] = cos_t
+                    m1, m2 = material_frame(load3(L.lane_reference, r), load3(L.lane_tangent, r), sin_t, cos_t)
                     real = L.lane_rest_length[r] > 0.0
                     store3(L.lane_d1, r, select3(real, m1, load3(L.lane_d1, r)))
                     store3(L.lane_d2, r, select3(real, m2, load3(L.lane_d2, r)))
@@ -541,7 +550,7 @@ def lanes_frames(twist_free: ti.template(), L: ti.template()):
         for k in range(m):
             _local_constants(L, g, r0 + k, k, m)
         for k in range(m - 1):
-            _reference_frame(L, g, r0 + k, k)
+            _reference_frame(L, g, r0 + k, k, True)
         if ti.static(twist_free):
             _twist_free(L, r0, m)
 
