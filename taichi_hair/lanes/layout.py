@@ -248,8 +248,9 @@ def v8c(f: ti.template(), idx, c: ti.template()):
 
 
 @ti.func
-def gather(L: ti.template(), g, model: ti.template(), body_rotation: ti.template(), x: ti.template(),
-            theta: ti.template(), es: ti.template(), buf: ti.template(), damping_scale: float, weight_floor: float):
+def gather_constants(L: ti.template(), g, model: ti.template(), body_rotation: ti.template(), buf: ti.template(),
+                     damping_scale: float, weight_floor: float):
+    """The Model's and the coefficients' values of group g (and its body rotation, damping and weight floor)."""
     strands = L.group_strand[g]
     base = L.group_vertex_start[g]
     L.group_damping[g] = V8([model.strand_damping_time[strands[q]] for q in ti.static(range(LANES))]) * damping_scale
@@ -279,18 +280,42 @@ def gather(L: ti.template(), g, model: ti.template(), body_rotation: ti.template
         L.lane_inertia[r] = v8(model.edge_rotational_inertia, i)
         # pair_weight's formula (admm.pair_weight), on the gathered values.
         L.lane_pair_weight[r] = ti.max(v8(buf.pair_admm_weight, i), weight_floor * m)
-        L.lane_strain_begin[r] = v8(buf.edge_strain_begin, i)
         L.lane_stretch_stiffness[r] = v8(buf.edge_pair_stretch_stiffness, i)
+        for c in ti.static(range(3)):
+            L.lane_bend_stiffness[r, c] = v8c(buf.pair_bend_stiffness, i, c)
+            L.lane_rest_kappa[r, c] = v8c(buf.pair_rest_kappa, i, c)
+
+
+@ti.func
+def gather_state(L: ti.template(), g, x: ti.template(), theta: ti.template(), es: ti.template(), buf: ti.template()):
+    """The state of group g at the step's start but its frames (:func:`gather_frames`): positions, twists, the
+    step's origins and strains, and the z-step's weights and targets."""
+    base = L.group_vertex_start[g]
+    r0 = L.group_row_start[g]
+    for k in range(L.group_vertex_count[g]):
+        r = r0 + k
+        i = base + k
+        L.lane_strain_begin[r] = v8(buf.edge_strain_begin, i)
         L.lane_twist_origin[r] = v8(buf.edge_twist_origin, i)
         L.lane_omega_origin[r] = v8(buf.edge_angular_velocity_origin, i)
         L.lane_twist[r] = v8(theta, i)
         for c in ti.static(range(3)):
-            L.lane_bend_stiffness[r, c] = v8c(buf.pair_bend_stiffness, i, c)
-            L.lane_rest_kappa[r, c] = v8c(buf.pair_rest_kappa, i, c)
             L.lane_kappa_begin[r, c] = v8c(buf.pair_kappa_begin, i, c)
             L.lane_position_origin[r, c] = v8c(buf.vertex_position_origin, i, c)
             L.lane_velocity_origin[r, c] = v8c(buf.vertex_velocity_origin, i, c)
             L.lane_position[r, c] = v8c(x, i, c)
+    gather_targets(L, g, buf)
+
+
+@ti.func
+def gather_frames(L: ti.template(), g, es: ti.template(), buf: ti.template()):
+    """The frames, duals and forces of group g at the step's start."""
+    base = L.group_vertex_start[g]
+    r0 = L.group_row_start[g]
+    for k in range(L.group_vertex_count[g]):
+        r = r0 + k
+        i = base + k
+        for c in ti.static(range(3)):
             L.lane_tangent[r, c] = v8c(es.edge_tangent, i, c)
             L.lane_reference[r, c] = v8c(es.edge_reference_director, i, c)
             L.lane_d1[r, c] = v8c(es.edge_material_d1, i, c)
@@ -298,7 +323,6 @@ def gather(L: ti.template(), g, model: ti.template(), body_rotation: ti.template
         for c in ti.static(range(6)):
             L.lane_dual[r, c] = v8c(buf.pair_dual, i, c)
             L.lane_force[r, c] = v8c(buf.pair_force, i, c)
-    gather_targets(L, g, buf)
 
 
 @ti.func

@@ -35,8 +35,8 @@ same bits from run to run (each lane's arithmetic does not depend on the others'
 import taichi as ti
 
 from ..elasticity import FRAME_PAIR, FRAME_ROOT
-from .layout import (V8, cross, dot, gather, gather_targets, load3, material_frame, matvec, matvec_t, normalized,
-                     parallel_transport, scale, scatter, scatter_positions, select3, sincos, store3, sub)
+from .layout import (V8, cross, dot, gather_constants, gather_frames, gather_state, gather_targets, load3, material_frame, matvec,
+                     matvec_t, normalized, parallel_transport, scale, scatter, scatter_positions, select3, sincos, store3, sub)
 
 vec3 = ti.math.vec3
 
@@ -529,12 +529,32 @@ def admm_iterations_lanes(
             scatter_positions(L, g, x)
 
 
+def lanes_gather(L, model, body_rotation, x, theta, es, buf, damping_scale: float, weight_floor: float) -> None:
+    """Every group's constants and state into the lanes (the beginning of a step), in three kernels: as one, Taichi
+    compiled them in 16-19 s, as three in 6.8 s (cold cache, a 64 x 14 groom, scratch probe 2026-12-07); its
+    passes grow faster than the code."""
+    _gather_constants(L, model, body_rotation, buf, damping_scale, weight_floor)
+    _gather_state(L, x, theta, es, buf)
+    _gather_frames(L, es, buf)
+
+
 @ti.kernel
-def lanes_gather(L: ti.template(), model: ti.template(), body_rotation: ti.template(), x: ti.template(),
-                 theta: ti.template(), es: ti.template(), buf: ti.template(), damping_scale: float, weight_floor: float):
-    """Every group's constants and state into the lanes (the beginning of a step with contacts)."""
+def _gather_constants(L: ti.template(), model: ti.template(), body_rotation: ti.template(), buf: ti.template(),
+                      damping_scale: float, weight_floor: float):
     for g in L.group_vertex_count:
-        gather(L, g, model, body_rotation, x, theta, es, buf, damping_scale, weight_floor)
+        gather_constants(L, g, model, body_rotation, buf, damping_scale, weight_floor)
+
+
+@ti.kernel
+def _gather_frames(L: ti.template(), es: ti.template(), buf: ti.template()):
+    for g in L.group_vertex_count:
+        gather_frames(L, g, es, buf)
+
+
+@ti.kernel
+def _gather_state(L: ti.template(), x: ti.template(), theta: ti.template(), es: ti.template(), buf: ti.template()):
+    for g in L.group_vertex_count:
+        gather_state(L, g, x, theta, es, buf)
 
 
 @ti.kernel
