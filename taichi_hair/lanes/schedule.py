@@ -65,7 +65,7 @@ def _pair_frame(L: ti.template(), r):
 
 @ti.func
 def _local_constants(L: ti.template(), g, r, k, m):
-    """Row r's (local index k of m) constants of the local step over a launch: its edge's 1 / l^2 and, for a pair,
+    """Row r's (local index k of m) constants of the local step over a step: its edge's 1 / l^2 and, for a pair,
     the diagonal w / ((1 + c) k) of w E^-1 (``strains.proximal_step5``; capped at 1e30 where a stiffness is 0)."""
     L.lane_inverse_rest_length2[r] = 1.0 / (L.lane_rest_length[r] * L.lane_rest_length[r])
     if 0 < k < m - 1:
@@ -534,7 +534,7 @@ def lanes_gather(L, model, body_rotation, x, theta, es, buf, damping_scale: floa
     compiled them in 16-19 s, as three in 6.8 s (cold cache, a 64 x 14 groom, scratch probe 2026-12-07); its
     passes grow faster than the code."""
     _gather_constants(L, model, body_rotation, buf, damping_scale, weight_floor)
-    _gather_state(L, x, theta, es, buf)
+    _gather_state(L, x, theta, buf)
     _gather_frames(L, es, buf)
 
 
@@ -552,9 +552,9 @@ def _gather_frames(L: ti.template(), es: ti.template(), buf: ti.template()):
 
 
 @ti.kernel
-def _gather_state(L: ti.template(), x: ti.template(), theta: ti.template(), es: ti.template(), buf: ti.template()):
+def _gather_state(L: ti.template(), x: ti.template(), theta: ti.template(), buf: ti.template()):
     for g in L.group_vertex_count:
-        gather_state(L, g, x, theta, es, buf)
+        gather_state(L, g, x, theta, buf)
 
 
 @ti.kernel
