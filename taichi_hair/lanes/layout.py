@@ -304,6 +304,10 @@ def gather_state(L: ti.template(), g, x: ti.template(), theta: ti.template(), bu
             L.lane_position_origin[r, c] = v8c(buf.vertex_position_origin, i, c)
             L.lane_velocity_origin[r, c] = v8c(buf.vertex_velocity_origin, i, c)
             L.lane_position[r, c] = v8c(x, i, c)
+        # The attachment springs (set between steps, SolverADMM.set_attachments).
+        L.lane_attach_weight[r] = v8(buf.vertex_attach_weight, i)
+        for c in ti.static(range(3)):
+            L.lane_attach_target[r, c] = v8c(buf.vertex_attach_target, i, c)
     gather_targets(L, g, buf)
 
 
@@ -327,17 +331,15 @@ def gather_frames(L: ti.template(), g, es: ti.template(), buf: ti.template()):
 
 @ti.func
 def gather_targets(L: ti.template(), g, buf: ti.template()):
-    """The collision and attachment weights and targets of group g (the z-step sets them between iterations)."""
+    """The collision weights and targets of group g (the z-step sets them between iterations)."""
     base = L.group_vertex_start[g]
     r0 = L.group_row_start[g]
     for k in range(L.group_vertex_count[g]):
         r = r0 + k
         i = base + k
         L.lane_contact_weight[r] = v8(buf.vertex_contact_weight, i)
-        L.lane_attach_weight[r] = v8(buf.vertex_attach_weight, i)
         for c in ti.static(range(3)):
             L.lane_contact_target[r, c] = v8c(buf.vertex_contact_target, i, c)
-            L.lane_attach_target[r, c] = v8c(buf.vertex_attach_target, i, c)
 
 
 @ti.func
