@@ -19,23 +19,19 @@ Per step (Sec. 4.2):
 5. optional geometric contact correction     -- ``ContactPipeline.correct`` (projection on x itself)
 6. v = (x - x^t)/dt, omega = (theta - theta^t)/dt; check every value is finite.
 
-Time integration (``SolverADMMConfig.integrator``): the paper's backward Euler,
-or BDF2, v_{n+1} = (3 x_{n+1} - 4 x_n + x_{n-1}) / (2 dt).  BDF2 is the same
-incremental problem with another inertia term: writing v_{n+1} = (x - x_hat) / h
-with h = 2 dt / 3 and x_hat = (4 x_n - x_{n-1}) / 3, the momentum balance
-M (v_{n+1} - v_hat) / h = F(x), v_hat = (4 v_n - v_{n-1}) / 3, is
-M (x - x_pred) / h^2 = F(x) with x_pred = x_hat + h v_hat -- backward Euler's
-form with (dt, x^t, v^t) replaced by (h, x_hat, v_hat) (likewise theta, omega with
-the rotational inertia).  So ``begin_step`` writes x_hat, v_hat into origin
-buffers, the assembly reads them with h in place of dt, and ``end_step`` sets
-v = (x - x_hat) / h.  The dissipative terms use the same BDF2 rate:
+Time integration (``SolverADMMConfig.integrator``): the paper's backward Euler, or BDF2, v_{n+1} = (3 x_{n+1} - 4
+x_n + x_{n-1}) / (2 dt). BDF2 is the same incremental problem with another inertia term: writing v_{n+1} = (x -
+x_hat) / h with h = 2 dt / 3 and x_hat = (4 x_n - x_{n-1}) / 3, the momentum balance M (v_{n+1} - v_hat) / h =
+F(x), v_hat = (4 v_n - v_{n-1}) / 3, is M (x - x_pred) / h^2 = F(x) with x_pred = x_hat + h v_hat -- backward
+Euler's form with (dt, x^t, v^t) replaced by (h, x_hat, v_hat) (likewise theta, omega with the rotational inertia).
+So ``begin_step`` writes x_hat, v_hat into origin buffers, the assembly reads them with h in place of dt, and
+``end_step`` sets v = (x - x_hat) / h. The dissipative terms use the same BDF2 rate:
   * air drag xi (v - v_air) with v = (x - x_hat) / h (the drag is a force at t_{n+1},
     evaluated with the step's own velocity, as backward Euler does with (x - x^t) / dt);
   * strain-rate damping tau K kappa_dot (Sec. 4.4), with kappa_dot = (kappa - kappa_hat) / h,
-    kappa_hat = (4 kappa_n - kappa_{n-1}) / 3 (``admm.bdf2_strain_origin``): the local step's
-    c (kappa - kappa_begin) with c = tau * damping_scale, damping_scale = 1 / h (1 / dt for
-    backward Euler).  Damping stays second-order consistent, so a damped rod converges at
-    second order too.
+    kappa_hat = (4 kappa_n - kappa_{n-1}) / 3 (``admm.bdf2_strain_origin``): the local step's c (kappa - kappa_begin)
+    with c = tau * damping_scale, damping_scale = 1 / h (1 / dt for backward Euler). Damping stays second-order
+    consistent, so a damped rod converges at second order too.
 x_{n-1}, v_{n-1}, theta_{n-1}, omega_{n-1} are the begin buffers of the last step (read by ``begin_step`` before it
 overwrites them); kappa_{n-1}, eps_{n-1} sit in ``pair_kappa_previous``/``edge_strain_previous``.  A step without
 that history -- the first one, one after ``reset_history``/``reset_duals`` or ``restore`` of a checkpoint without
@@ -245,6 +241,10 @@ class SolverADMM(SolverBase):
         step has at least ANDERSON_MIN_ITERATIONS iterations (``config.iterations`` may change between steps)."""
         return self.anderson.window > 0 and self.config.iterations >= ANDERSON_MIN_ITERATIONS
 
+    def _active_lanes(self):
+        """The lane layout where this step runs the lanes, else None (a step that mixes runs the strand kernel)."""
+        return self._lanes if self._lanes is not None and not self._anderson_on() else None
+
     def _continuous_iterations(self) -> set:
         """ADMM iterations (0-based) that begin with continuous-time detection: ``continuous_detections``
         of them at regular intervals, the first on the advected guess (iteration 0)."""
@@ -300,7 +300,7 @@ class SolverADMM(SolverBase):
         if not cfg.warm_start_duals:
             admm.reset_duals(b)
         t0 = self._tock("begin", t0)
-        if self._lanes is None or self._anderson_on():  # (the lanes move their own: lanes_frames after the gather)
+        if self._active_lanes() is None:  # (the lanes move their own: lanes_frames after the gather)
             self._update_frames(state, control)
         t0 = self._tock("frames", t0)
 
@@ -345,7 +345,7 @@ class SolverADMM(SolverBase):
         (``schedule_strand``, or ``lanes`` when no Anderson mixing), with contacts one launch per iteration and the
         z-step between them (it couples strands; the lanes are gathered once per step, and only x goes back between)."""
         m, b, cfg, con, x, theta = self.model, self.buf, self.config, self.contacts, state.vertex_position, state.edge_twist
-        lanes = self._lanes if self._lanes is not None and not self._anderson_on() else None
+        lanes = self._active_lanes()
 
         def launch(iterations: int, mode: int) -> None:
             if lanes is not None:

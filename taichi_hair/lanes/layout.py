@@ -4,11 +4,12 @@ lanes.  See :mod:`taichi_hair.lanes.schedule` for why and for the iteration itse
 import numpy as np
 import taichi as ti
 
+from ..fields import vec6
+
 LANES = 8
 V8 = ti.types.vector(LANES, ti.f32)
 I8 = ti.types.vector(LANES, ti.i32)
 vec3 = ti.math.vec3
-vec6 = ti.types.vector(6, float)
 
 
 # =========================================================================== lane arithmetic
@@ -289,7 +290,7 @@ def gather_constants(L: ti.template(), g, model: ti.template(), body_rotation: t
 @ti.func
 def gather_state(L: ti.template(), g, x: ti.template(), theta: ti.template(), buf: ti.template()):
     """The state of group g at the step's start but its frames (:func:`gather_frames`): positions, twists, the
-    step's origins and strains, and the z-step's weights and targets."""
+    step's origins and strains, the attachment springs, and the z-step's weights and targets."""
     base = L.group_vertex_start[g]
     r0 = L.group_row_start[g]
     for k in range(L.group_vertex_count[g]):
