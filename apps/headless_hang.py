@@ -25,8 +25,9 @@ def main(argv=None):
 
     import taichi as ti
 
-    ti.init(arch=getattr(ti, args.arch), log_level=ti.WARN)
     import taichi_hair as th
+
+    th.init(arch=getattr(ti, args.arch), log_level=ti.WARN)
     from taichi_hair.scene.builtin import HangScene, build_hang, nod_rotation
 
     scene = HangScene(strands=args.strands)

@@ -234,8 +234,9 @@ def main(argv=None):
     bench = Bench("admm", argv)
     import taichi as ti
 
-    ti.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], log_level=ti.WARN)
     import taichi_hair as th
+
+    th.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], log_level=ti.WARN)
 
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
     out = {"date": time.strftime("%Y-%m-%d"), "arch": arch, "throughput": []}

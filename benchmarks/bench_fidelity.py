@@ -73,8 +73,9 @@ def main(argv=None) -> int:
     bench = Bench("fidelity", argv)
     import taichi as ti
 
-    ti.init(arch=getattr(ti, a.arch), default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     import taichi_hair as th
+
+    th.init(arch=getattr(ti, a.arch), default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
 
     res = {"arch": a.arch, "date": time.strftime("%Y-%m-%d"), "strands": a.strands}
 

@@ -77,7 +77,9 @@ def main(argv=None):
 
     import taichi as ti
 
-    ti.init(arch=getattr(ti, args.arch), default_fp=ti.f32, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=getattr(ti, args.arch), default_fp=ti.f32, log_level=ti.WARN)
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
     from taichi_hair.cli.common import no_numpy_huge_pages
 

@@ -47,7 +47,9 @@ def main(argv=None) -> int:
     import numpy as np
     import taichi as ti
 
-    ti.init(arch=getattr(ti, args.arch), log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=getattr(ti, args.arch), log_level=ti.WARN)
     from taichi_hair.scene.file import load_scene
 
     rows = []

@@ -136,7 +136,9 @@ def main(argv=None):
     bench = Bench("shape", argv)
     import taichi as ti
 
-    ti.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], default_fp=ti.f32, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch={"cpu": ti.cpu, "cuda": ti.cuda}[args.arch], default_fp=ti.f32, log_level=ti.WARN)
     import taichi_hair as th
 
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]

@@ -63,7 +63,9 @@ def main(argv=None):
 
     import taichi as ti
 
-    ti.init(arch=getattr(ti, args.arch), default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=getattr(ti, args.arch), default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     from taichi_hair.groom.skinning import SkinningConfig, SkinningLBS, build_guides
 
     # The date, the machine's name and the load average at the start: the harness's machine block.

@@ -93,8 +93,10 @@ def main(argv=None):
 
     import taichi as ti
 
-    ti.init(arch=ti.cpu if args.arch == "cpu" else ti.cuda, default_fp=ti.f32, offline_cache=True,
-            log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu if args.arch == "cpu" else ti.cuda, default_fp=ti.f32, offline_cache=True,
+                     log_level=ti.WARN)
     rows = bench(ti, args.strands, args.vertices, settings, args.steps, args.schedules.split(","))
     result = {"arch": args.arch, "precision": "f32",
               "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),

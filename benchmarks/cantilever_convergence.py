@@ -27,7 +27,9 @@ def main(argv=None):
     bench = Bench("cantilever_convergence", argv)
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair import SimulationDivergedError
     from taichi_hair.validation.cantilever import default_lengths, run_cantilever
 

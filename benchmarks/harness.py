@@ -59,7 +59,7 @@ def _taichi_initialised():
 
 
 def taichi_info() -> dict:
-    """Taichi's version and, once initialised, its arch and default float type ({} without taichi)."""
+    """Taichi's version and, once initialised, its arch, default float type and IR opt_level ({} without taichi)."""
     ti = sys.modules.get("taichi")
     if ti is None:
         return {}
@@ -69,6 +69,7 @@ def taichi_info() -> dict:
         cfg = ti.lang.impl.current_cfg()
         info["arch"] = str(cfg.arch).split(".")[-1]
         info["default_fp"] = str(cfg.default_fp).split(".")[-1] if getattr(cfg, "default_fp", None) else None
+        info["opt_level"] = getattr(cfg, "opt_level", None)  # 0 under taichi_hair.init (TAICHI_INIT_OPTIONS)
         if info["arch"] == "cuda":
             gpu = _run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"])
             if gpu:

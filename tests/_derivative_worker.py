@@ -14,7 +14,8 @@ import numpy as np
 import taichi as ti
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-ti.init(arch=ti.cpu, default_fp=ti.f64, log_level=ti.WARN)
+import taichi_hair  # noqa: E402
+taichi_hair.init(arch=ti.cpu, default_fp=ti.f64, log_level=ti.WARN)
 
 from taichi_hair import strains as S  # noqa: E402
 from taichi_hair.frames import wrap_angle  # noqa: E402

@@ -18,7 +18,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 
-ti.init(arch=ti.vulkan, log_level=ti.ERROR)
+import taichi_hair  # noqa: E402
+taichi_hair.init(arch=ti.vulkan, log_level=ti.ERROR)
 arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
 out = {"arch": arch}
 if arch != "vulkan":

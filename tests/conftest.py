@@ -39,7 +39,9 @@ def taichi_cpu():
     """
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f32, random_seed=0, offline_cache=True, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, random_seed=0, offline_cache=True, log_level=ti.WARN)
     from taichi_hair.cli.common import lighter_kernel_positions
 
     lighter_kernel_positions()  # as the command line does: a cheaper kernel frontend, the same kernels

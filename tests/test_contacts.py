@@ -159,7 +159,8 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
     quasistatic detections and an edge searches again only once a vertex moved more than skin / 3 since its last
     search.  Over 12 detections of the random groom, a third of its strands moving 0.05-0.5 mm between
     detections and the rest 0-10 um (the brute-force test's groom: 0.6 mm radii, 0.2 mm margin), every edge's
-    list holds the same edges as with a search every step (a pair left out was >= reach + skin apart at the
+    list holds the same edges as with a search every step (equally near edges at its farthest kept distance may
+    swap; a pair left out was >= reach + skin apart at the
     later of its edges' searches and came <= skin closer), their distances within 1e-8 m: the same segment
     test, compiled into another kernel (with fast math the two round differently; float32 coordinates of ~1 cm
     round at ~1e-9 m: 2.5e-11 m measured on the closest pair).  A detection where nothing moved searches no
@@ -218,7 +219,10 @@ def test_a_verlet_skin_gives_the_pairs_of_a_search_every_step():
         assert np.array_equal(c0, c1), step
         for a in np.nonzero(c0)[0]:
             k = c0[a]
-            assert set(e0[a, :k]) == set(e1[a, :k]), (step, a)
+            # The same candidates, but for ties at the farthest kept distance: two edges of a strand that share the
+            # nearest vertex are equally near (seen: edges 292 and 293 both at 1.13094 mm), and either may be kept.
+            far = d0[a, :k].max() - 1e-8
+            assert set(e0[a, :k][d0[a, :k] < far]) == set(e1[a, :k][d1[a, :k] < far]), (step, a)
             assert np.allclose(d0[a, :k], d1[a, :k], rtol=0.0, atol=1e-8), (step, a)
         assert c0.sum() > 100
         searched.append(pipes[0].statistics(st.vertex_position)["pair_skin_edges_searched"])

@@ -119,7 +119,10 @@ def test_lanes_with_hair_contacts_follow_the_strand_schedule():
     bundle (0.3 mm apart: ~480 hair contacts on 144 vertices) while their root turns.  After one step the two
     schedules differ by rounding (measured 7e-9 m; tolerance 1e-6 of the largest coordinate, 6e-8 m); in so dense a
     bundle a contact switches at a slightly different iterate now and then and the difference grows (measured 1.0e-5 m
-    after 12 steps, 1.7e-4 of the largest coordinate; tolerance 5e-4), with the same contact counts within 1 %.  Then
+    after 12 steps under Taichi's default IR passes, 8.8e-5 m under ``taichi_hair.init``'s opt_level 0; tolerance 5e-3
+    of the largest coordinate, 2.9e-4 m), with the same contact counts within 1 %.  The growth is the bundle's, not
+    the lanes': the strand schedule itself, with one strand's input moved by at most 6 nm, ends 1.1e-5 m (default
+    passes) / 2.1e-4 m (opt_level 0) from its unmoved run (scratch probe, 2026-12-07).  Then
     one more step with springs pulling two tips 5 mm aside (``set_attachments``, ~10 m/dt^2; the lanes gather them
     once per step, not per iteration): the tips move 3.1-3.3 mm in it, 1.2-1.3 mm of it from the springs (measured),
     the same in both schedules within 5e-5 m (the states already differ by ~1e-5 m; lanes that dropped the springs
@@ -151,7 +154,7 @@ def test_lanes_with_hair_contacts_follow_the_strand_schedule():
     assert np.all(pulled["strand"][:, 0] > 1e-3) and np.max(np.abs(pulled["lanes"] - pulled["strand"])) <= 5e-5
     assert counts["strand"] > 400 and abs(counts["lanes"] - counts["strand"]) <= 0.01 * counts["strand"]
     _assert_close(out["strand", "first"], out["lanes", "first"], rel=1e-6, angle=1e-4)
-    _assert_close(out["strand"], out["lanes"], rel=5e-4, angle=1e-2)
+    _assert_close(out["strand"], out["lanes"], rel=5e-3, angle=1e-2)
 
 
 def test_the_lanes_sin_and_cos_are_within_2_ulp_of_float64_with_every_quadrant_sign():

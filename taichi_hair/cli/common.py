@@ -19,7 +19,9 @@ def _init_taichi(arch: str, precision: str):
     if arch not in archs:
         raise CLIError(f"--arch must be one of {sorted(archs)}, got {arch!r}")
     fp = {"f32": ti.f32, "f64": ti.f64}[precision]
-    ti.init(arch=archs[arch], default_fp=fp, log_level=ti.WARN)
+    from taichi_hair import init
+
+    init(arch=archs[arch], default_fp=fp, log_level=ti.WARN)
     lighter_kernel_positions()
     no_numpy_huge_pages()
     used = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
