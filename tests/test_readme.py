@@ -116,7 +116,7 @@ def test_every_readme_command_runs_at_a_small_size(tmp_path):
 
 def test_the_readme_python_blocks_run_in_order(tmp_path):
     code = "\n".join(blocks("python"))
-    assert "ti.init" in code
+    assert "th.init(arch=ti.cpu)" in code
     script = tmp_path / "readme.py"
     script.write_text(code)
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
