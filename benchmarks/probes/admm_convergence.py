@@ -111,7 +111,9 @@ def main(argv=None) -> int:
         return 2
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     rate = float(argv[1]) if len(argv) > 1 else 96.0
     if argv[0] == "step":
         step_study(rate, float(argv[2]) if len(argv) > 2 else 0.3)

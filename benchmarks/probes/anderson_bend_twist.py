@@ -24,7 +24,9 @@ def main(argv=None) -> int:
     import numpy as np
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     import taichi_hair.config as config
     from taichi_hair.validation import bend_twist as bt
 

@@ -31,7 +31,9 @@ def main(argv=None) -> int:
     import numpy as np
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     import taichi_hair.solver_admm as solver_module
     from taichi_hair.bench import pareto_runs as P
     from taichi_hair.config import SolverADMMConfig

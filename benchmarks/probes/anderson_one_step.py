@@ -27,7 +27,9 @@ def main(argv=None) -> int:
     import numpy as np
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair.builder import GroomBuilder
     from taichi_hair.config import RodMaterial, SolverADMMConfig
     from taichi_hair.solver_admm import SolverADMM

@@ -30,7 +30,9 @@ def main(argv=None) -> int:
         return 2
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair.bench import methods
     from taichi_hair.bench import stability as S
 

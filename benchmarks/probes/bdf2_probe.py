@@ -22,7 +22,9 @@ import taichi as ti  # ti.init is in swing() and atlas() (f64 and f32)
 
 
 def swing():
-    ti.init(arch=ti.cpu, default_fp=ti.f64, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f64, log_level=ti.WARN)
     from taichi_hair.bench import pareto as P
     from taichi_hair.bench import pareto_runs as PR
 
@@ -73,7 +75,9 @@ def swing():
 
 
 def atlas():
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair.bench import stability as S
 
     cases = S.default_cases()

@@ -8,7 +8,9 @@ import time
 def main(argv=None) -> int:
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     from taichi_hair.validation.cantilever import clamp_convention_tip_drops
 
     t = time.perf_counter()

@@ -23,7 +23,9 @@ from taichi_hair.scene.builtin import HairballScene, build_hairball, hairball_ro
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     N, frames = int(argv[0]), int(argv[1])
     kv = dict(a.split("=") for a in argv[2:])
     iters = int(kv.get("iterations", 10))

@@ -82,7 +82,9 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     strands = int(argv[0]) if argv else 1000
     frames = int(argv[1]) if len(argv) > 1 else 10
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair import SolverADMM, SolverADMMConfig
     from taichi_hair.config import ContactConfig
     from taichi_hair.contact.colliders import SphereCollider

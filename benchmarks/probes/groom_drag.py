@@ -54,7 +54,9 @@ def main(argv=None) -> int:
 
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f32, log_level=ti.ERROR)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, log_level=ti.ERROR)
     _, session = benchmark_session(args.strands)
     session.advance(4)
     if args.correction_cap is not None:

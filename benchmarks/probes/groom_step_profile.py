@@ -31,7 +31,9 @@ def main() -> int:
     a = ap.parse_args()
     import taichi as ti
 
-    ti.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN, kernel_profiler=True)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN, kernel_profiler=True)
     from taichi_hair.cli.common import no_numpy_huge_pages
     from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
     from taichi_hair.groom.session import GroomingConfig, GroomingSession

@@ -70,7 +70,9 @@ def main(argv=None) -> int:
     mode, n, frames = argv[0], int(argv[1]), int(argv[2])
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     run(mode, n, frames)
     return 0
 

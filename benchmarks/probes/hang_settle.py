@@ -61,7 +61,9 @@ def main(argv=None) -> int:
     args = parse(sys.argv[1:] if argv is None else list(argv))
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     run(*args)
     return 0
 

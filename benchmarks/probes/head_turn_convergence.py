@@ -69,7 +69,9 @@ def main(argv=None) -> int:
     import numpy as np
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair.scene.file import load_scene
 
     with tempfile.TemporaryDirectory() as work:

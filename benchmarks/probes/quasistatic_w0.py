@@ -38,7 +38,9 @@ def run(w0: float, steps: int = 3000) -> None:
 def main(argv=None) -> int:
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     for w0 in (25.0, 5.0, 1.0):
         run(w0)
     return 0

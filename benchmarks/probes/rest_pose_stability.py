@@ -35,7 +35,9 @@ def main(argv=None) -> int:
     import taichi as ti
     from scipy.spatial import cKDTree
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair.scene.file import load_scene
     from taichi_hair.solvers.rest_pose import apply_rest_pose, check_stability, solve_rest_pose
 

@@ -57,7 +57,9 @@ def main(argv=None) -> int:
     import numpy as np
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
     from taichi_hair.contact.colliders import SphereCollider
     from taichi_hair.solvers.rest_pose import apply_rest_pose, clear_rest_pose, solve_rest_pose

@@ -36,7 +36,9 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f32, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, log_level=ti.WARN)
     from taichi_hair import GroomBuilder, RodMaterial, SolverADMM, SolverADMMConfig
     from taichi_hair.config import ContactConfig
 

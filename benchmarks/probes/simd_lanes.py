@@ -43,7 +43,9 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     if a.strands % 8 or a.vertices < 3:
         raise SystemExit("--strands must be a multiple of 8 and --vertices at least 3")
-    ti.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN)
     S, M, L = a.strands, a.vertices, 8
     G = S // L
     branch = a.branch

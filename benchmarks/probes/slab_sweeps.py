@@ -38,7 +38,9 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     import taichi as ti
 
-    ti.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN)
     from groom_drag import benchmark_session  # (this folder: the grooming benchmark's groom and session)
     from taichi_hair.contact.projection import SEQUENTIAL, SLAB_ORDER, SLABS, projection_sweep
 

@@ -71,7 +71,9 @@ def run(frames: int = 10) -> None:
 def main(argv=None) -> int:
     import taichi as ti
 
-    ti.init(arch=ti.cpu, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, log_level=ti.WARN)
     run()
     return 0
 

@@ -31,7 +31,9 @@ def main(argv=None) -> int:
     configs = [(int(a), int(b)) for a, b in (c.split("x") for c in argv)] or DEFAULT_CONFIGS
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     run(configs)
     return 0
 

@@ -48,7 +48,9 @@ def run(mode, twist, steps, dt=1 / 96, its=10, sched='auto'):
 def main(argv=None) -> int:
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, offline_cache=True, log_level=ti.WARN)
     for mode, steps in (("quasistatic", 300), ("dynamic", 96)):
         for sched in ("strand", "stage"):
             xa, ca, ta = run(mode, "auto", steps, sched=sched)
