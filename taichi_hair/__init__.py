@@ -76,9 +76,9 @@ __version__ = "0.1.0"
 #: forwarding, dead-store elimination) and its whole-kernel common-subexpression elimination; LLVM's optimizer
 #: still runs in full.  Those passes grow faster than the kernels: on the 2-core VM (2026-12-07, cold cache) the
 #: lanes schedule's first step took 27.6 s with them and 9.7 s without, and the grooming benchmark's cold first
-#: frame (86,000 strands, sag-free) 64.3 s against 26.0 s, while steps ran as fast (ADMM 1,000 x 32, strand and
-#: lanes schedules, hairball 1,000 strands with contacts, grooming frame: within the VM's noise, in alternated
-#: runs; BENCHMARKS.md, "Kernel compilation: Taichi's IR passes").  What changes: the machine code, hence the
+#: frame (86,000 strands, sag-free) 58.6 s against 19.1-20.5 s in the same hour, while steps ran as fast (ADMM
+#: 1,000 x 32, strand and lanes schedules, hairball 1,000 strands with contacts, grooming frame: within the VM's
+#: noise, in alternated runs; BENCHMARKS.md, "Kernel compilation: Taichi's IR passes").  What changes: the machine code, hence the
 #: rounding of some results (a run is bit-identical to itself, not to a run under ``ti.init``'s defaults).
 TAICHI_INIT_OPTIONS = {"opt_level": 0}
 
@@ -89,4 +89,3 @@ def init(arch=None, **kwargs):
     import taichi as ti
 
     return ti.init(arch=arch if arch is not None else ti.cpu, **{**TAICHI_INIT_OPTIONS, **kwargs})
-

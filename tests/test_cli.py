@@ -189,6 +189,18 @@ def test_the_command_line_switches_numpy_huge_page_advice_off_unless_the_environ
         multiarray._set_madvise_hugepage(before)
 
 
+def test_the_tests_run_under_taichi_hair_init_options():
+    """conftest starts Taichi through ``taichi_hair.init``, as the command line does: opt_level 0
+    (``TAICHI_INIT_OPTIONS``: Taichi's CFG optimization and whole-kernel CSE off), the precision as given."""
+    import taichi as ti
+
+    import taichi_hair as th
+
+    cfg = ti.lang.impl.current_cfg()
+    assert th.TAICHI_INIT_OPTIONS == {"opt_level": 0}
+    assert cfg.opt_level == 0 and cfg.default_fp == ti.f32
+
+
 def test_lighter_kernel_positions_change_no_bit_and_keep_file_and_line_in_compile_errors(tmp_path):
     """cli.common.lighter_kernel_positions (a cheaper Taichi frontend, applied after ti.init): the same run with
     Taichi's own position messages (TAICHI_HAIR_STOCK_POSITIONS=1) gives the same frames, bit for bit; and a
