@@ -85,7 +85,8 @@ TAICHI_INIT_OPTIONS = {"opt_level": 0}
 
 def init(arch=None, **kwargs):
     """``ti.init(arch, **kwargs)`` with :data:`TAICHI_INIT_OPTIONS` where ``kwargs`` does not set them (the
-    application's choice, called once per process as ``ti.init`` is; the package never calls it at import)."""
+    application's choice, called once per process as ``ti.init`` is; the package never calls it at import).
+    ``arch=None`` is Taichi's own default (``TI_ARCH`` where set, else the CPU)."""
     import taichi as ti
 
-    return ti.init(arch=arch if arch is not None else ti.cpu, **{**TAICHI_INIT_OPTIONS, **kwargs})
+    return ti.init(arch=arch, **{**TAICHI_INIT_OPTIONS, **kwargs})

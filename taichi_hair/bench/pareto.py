@@ -134,9 +134,9 @@ def _worker_main(argv) -> int:
     strands = int(argv[argv.index("--groom-strands") + 1]) if "--groom-strands" in argv else 192
     import taichi as ti
 
-    import taichi_hair
+    from .. import init
 
-    taichi_hair.init(arch=ti.cpu, default_fp=ti.f64 if precision == "f64" else ti.f32, log_level=ti.WARN)
+    init(arch=ti.cpu, default_fp=ti.f64 if precision == "f64" else ti.f32, log_level=ti.WARN)
     results = {}
     t0 = time.perf_counter()
     for sc in scenes:
