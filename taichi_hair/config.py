@@ -300,14 +300,13 @@ class ContactConfig:
             it off, it must be < 1 [-].  Measured (same probe, 40 / 80 sweeps): p99 88 / 55 um without, 58 /
             24 with 0.9, 32 / 7 with 0.98, 20 / 3 with 0.99 (default), 27 / 3 with 0.995 (another run's
             frame 10 than above: the runs are chaotic); strain p99 at most 0.02 % after 40 sweeps in all.
-        mass_splitting: how many virtual copies of a vertex the Delassus
-            diagonal D_hat uses (Sec. 4.5 "Hybrid contact solve"): ``"vertex"``
-            splits each vertex among all its contacts n_i (the paper's D_hat);
-            ``"batch"`` (default) among its contacts in the same batch only,
-            since only those are updated together by the Jacobi step (batches
-            follow one another Gauss-Seidel style).  Both have the same fixed
-            point; ``"batch"`` converges faster where vertices have many
-            contacts (measured on the hairball, ``BENCHMARKS.md``).
+        mass_splitting: how many virtual copies of a vertex the Delassus diagonal D_hat uses (Sec. 4.5 "Hybrid contact
+            solve"): ``"vertex"`` splits each vertex among all its contacts n_i (the paper's D_hat); ``"batch"`` (default)
+            among its contacts in the same batch only, since only those are updated together by the Jacobi step (batches
+            follow one another Gauss-Seidel style).  The same fixed point; ``"batch"`` converges faster where vertices have
+            many contacts (measured on the hairball, ``BENCHMARKS.md``).
+        redetect_share: a quasistatic step keeps the last detection's contacts, measured again, while no vertex has
+            moved more than this share of ``margin`` since, the bodies still (``contact.reuse``); 0 detects every step [-].
         continuous_detections: continuous-time detections per step (Sec. 4.5:
             ACCD, the two earliest impacts per edge), run at regular
             intervals of the ADMM iterations (the paper's "CT" hairball uses
@@ -401,6 +400,7 @@ class ContactConfig:
     rigid_reach: bool = False
     keep_rest_overlaps: bool = True
     weight_time: WeightTime = WeightTime.HAIR_STEP
+    redetect_share: float = 0.25
 
     def __post_init__(self):
         if not (math.isfinite(self.friction) and self.friction >= 0):
@@ -408,7 +408,7 @@ class ContactConfig:
         if not (isinstance(self.correction_chebyshev_rho, (int, float)) and 0 <= self.correction_chebyshev_rho < 1):
             raise ValueError("ContactConfig.correction_chebyshev_rho must be a number in [0, 1), got "
                              f"{self.correction_chebyshev_rho!r}")
-        for name in ("margin", "velocity_margin", "correction_tolerance", "pair_skin"):
+        for name in ("margin", "velocity_margin", "correction_tolerance", "pair_skin", "redetect_share"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"ContactConfig.{name} must be a finite number >= 0, got {v!r}")

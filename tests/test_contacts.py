@@ -1311,3 +1311,67 @@ def test_the_lockstep_edge_passes_equal_one_strand_at_a_time():
     real = rest[:-1] > 0
     before, after = (np.abs(np.linalg.norm(np.diff(p, axis=0), axis=1)[real] - rest[:-1][real]).max() for p in (x, ref))
     assert after < 0.25 * before, (before, after)
+
+
+def test_a_quasistatic_step_keeps_the_last_detections_contacts_measured_as_a_detection_measures_them():
+    """``contact.reuse`` (``ContactConfig.redetect_share``, 0.25): rod B (clamped at one end) lies across clamped rod A,
+    quasistatic steps of 10 ADMM iterations under 50 m/s^2, a 0.4 mm margin.  B settles by ~20 um per step, under a
+    quarter of the margin, so steps keep the last detection's contacts.  Kept contacts equal a detection's at the same
+    positions: the same pairs, weights, normals, u_kin and D_hat to 1e-6 (relative to the largest; the same float32
+    formulas compiled into other kernels), the same carried impulses r~ and collision duals lambda_z to 1e-6 of the
+    largest.  A vertex moved by more than a quarter of the margin since the detection, or ``redetect_share = 0``:
+    the step detects."""
+    mat = RodMaterial(radius=5e-5)
+    b = GroomBuilder()
+    b.add_strand(line((-0.01, 0.0, 0.0), (0.01, 0.0, 0.0), 11), mat, root="clamped")
+    b.add_strand(line((0.0, 1.0e-4, -0.01), (0.0, 1.0e-4, 0.01), 11), mat, root="clamped")
+    model = b.finalize()
+    st, ctl = model.state(), model.control()
+    ctl.gravity = (0.0, -50.0, 0.0)
+    solver = SolverADMM(model, SolverADMMConfig(iterations=10, mode="quasistatic",
+                                                contacts=ContactConfig(friction=0.3, velocity_margin=0.0, margin=4e-4)))
+    pl = solver.contacts
+    kept = []
+    for _ in range(12):
+        solver.step(st, ctl, 1.0)
+        kept.append(pl.contacts_reused)
+    assert any(kept[4:]), kept
+    names = ("contact_vertex", "contact_weight", "contact_normal", "contact_kinematic", "contact_delassus",
+             "contact_accumulated")
+
+    def contacts():
+        nc = pl.contact_count
+        out = {n: getattr(pl.con, n).to_numpy()[:nc].astype(np.float64) for n in names}
+        order = np.lexsort((out["contact_vertex"][:, 2], out["contact_vertex"][:, 0]))
+        out = {n: a[order] for n, a in out.items()}
+        out["dual"] = pl.con.vertex_contact_dual.to_numpy().astype(np.float64)
+        return out
+
+    solver.step(st, ctl, 1.0)  # (a step that keeps them leaves the impulses a detection carries: the next check)
+    assert pl.detect(st, 1.0, ctl.gravity, False) > 0 and pl.contacts_reused
+    a = contacts()
+    pl._detection_key = None  # the same positions, detected
+    pl._warm_valid = True
+    pl.detect(st, 1.0, ctl.gravity, False)
+    assert not pl.contacts_reused
+    d = contacts()
+    assert np.array_equal(a["contact_vertex"], d["contact_vertex"])
+    assert np.abs(a["contact_accumulated"]).max() > 0
+    for n in names[1:] + ("dual",):
+        scale = max(np.abs(d[n]).max(), 1e-30)
+        assert np.abs(a[n] - d[n]).max() <= 1e-6 * scale, (n, np.abs(a[n] - d[n]).max(), scale)
+    # Moved beyond a quarter of the margin (1e-4 m): detected.
+    solver.step(st, ctl, 1.0)
+    x = st.positions()
+    x[15] += np.array([0.0, 0.0, 1.2e-4], np.float32)
+    st.vertex_position.from_numpy(x)
+    solver.step(st, ctl, 1.0)
+    assert not pl.contacts_reused
+    again = []
+    for _ in range(4):  # (the moved vertex springs back: the steps after it may detect too)
+        solver.step(st, ctl, 1.0)
+        again.append(pl.contacts_reused)
+    assert any(again), again
+    pl.config.redetect_share = 0.0
+    solver.step(st, ctl, 1.0)
+    assert not pl.contacts_reused

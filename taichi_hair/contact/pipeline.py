@@ -13,6 +13,7 @@ from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, build_adjacency, count_contacts, write_contacts)
 from .projection import SLAB_ORDER, SLABS, warn_soft_rest_lengths
+from .reuse import kept_contacts, reuse_key
 
 #: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial_contacts``) [-].  Measured
 #: on 2 cores (2026-12-05, bit-identical either way): the head turn (6,148 contacts) 761 -> 529 ms per frame, the
@@ -132,6 +133,11 @@ class ContactPipeline:
         #: per-vertex counts [-], shape (vertex_count + 1,): allocated here when ``late_body_contacts`` is on and
         #: there are colliders (so a step allocates nothing; a direct call allocates it then).
         self.late_body_contacts = 0
+        #: Kept detections (``contact.reuse``): what the last detection shares with the steps that may keep its contacts
+        #: (None: none may), the positions it ran at [m] (vertex_count,), whether the last step kept them, and how
+        #: many steps did since the pipeline was made.
+        self._detection_key, self.contacts_reused, self.reuse_count = None, False, 0
+        self._detected_at = ti.Vector.field(3, float, n)
         self._late_count = (ti.field(ti.i32, n + 1) if config.late_body_contacts and self.colliders.count > 0
                             else None)
 
@@ -158,6 +164,7 @@ class ContactPipeline:
             if old is None or not all(np.array_equal(a, b) for a, b in zip(old, key)):
                 self.pairs.skin_valid = False
             self._warm_valid = False  # (the carried impulses are dropped: the edited strands' pairs have moved)
+            self._detection_key = None  # (new radii, masses or rest shapes: the next step detects)
         self._pair_key = key
         density = np.array([model.materials[s].density for s in range(model.strand_count)])[strand]
         e_bend = np.array([model.materials[s].youngs_modulus_bend for s in range(model.strand_count)])[strand]
@@ -231,6 +238,9 @@ class ContactPipeline:
 
         m, cfg, g = self.model, self.config, self.grid
         x, v = state.vertex_position, state.vertex_velocity
+        key = reuse_key(self, dt, gravity, dynamic)
+        if kept_contacts(self, x, key):  # (``contact.reuse``: the last detection's contacts, measured again)
+            return self.contact_count
         fit = _WORLD_FRAME
         if dynamic and cfg.rigid_reach and cfg.hair_hair:
             # Hair-hair reaches from velocities relative to the hair's best-fit rigid motion (grid module).
@@ -329,6 +339,9 @@ class ContactPipeline:
         self.capped_queries = 0
         self.ccd_skipped = 0
         self._dt, self._gn, self._dynamic = dt, gn, dynamic
+        if key is not None:  # (kept for the next steps: ``contact.reuse``)
+            self._detected_at.copy_from(x)
+        self._detection_key, self.contacts_reused = key, False
         return total
 
     def detect_continuous(self, x0, x) -> int:
@@ -371,6 +384,8 @@ class ContactPipeline:
                             self._dt, self._gn, self._dynamic, first, cfg.mass_splitting == MassSplitting.BATCH,
                             self._bending_time(self._dynamic), self.uses_batches(self._dynamic))
         self.continuous_contacts += added
+        if added > 0:
+            self._detection_key = None
         return added
 
     def detect_late_body(self, x) -> int:
@@ -404,6 +419,7 @@ class ContactPipeline:
                         self._dt, self._gn, self._dynamic, first, self.config.mass_splitting == MassSplitting.BATCH,
                         self._bending_time(self._dynamic), self.uses_batches(self._dynamic))
         self.late_body_contacts += added
+        self._detection_key = None  # (the appended contacts: the next step detects)
         return added
 
     def _strands_apart(self, x, margin: float, sweep: float, fall: float) -> bool:
@@ -461,6 +477,7 @@ class ContactPipeline:
         new.contact_group_start.copy_from(old.contact_group_start)  # (the appended contacts join the last group)
         new.contact_count[None] = keep
         self.con = new
+        self._detection_key = None
         self.grow_events += 1
 
     def project(self, x, buf, sweeps: int) -> None:
@@ -556,4 +573,5 @@ class ContactPipeline:
                 "continuous_contacts": self.continuous_contacts, "accd_capped": self.capped_queries,
                 "continuous_passes_skipped": self.ccd_skipped, "hair_search_skipped": self.hair_search_skipped,
                 "late_body_contacts": self.late_body_contacts, "rest_overlap_contacts": kept,
+                "contacts_reused": self.contacts_reused,
                 "pair_skin_edges_searched": self.pair_skin_searched}

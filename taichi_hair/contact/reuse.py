@@ -1,0 +1,131 @@
+"""The contacts of a quasistatic step kept for the next one (``ContactConfig.redetect_share``; a choice of this project).
+
+A detection (``ContactPipeline.detect``) finds every pair within r_a + r_b + margin, keeps each edge's closest ones,
+writes the contacts, sorts them by slab group, builds the vertices' lists and weights and carries the last step's
+impulses over pair by pair: 65-80 ms of a 270-350 ms still step of the grooming benchmark (2026-12-07, kernel
+profiler).  Between two quasistatic steps of a groom at rest the hair moves by micrometres, and the contact set
+hardly changes (150-2,000 of 153k contacts each step).  So while no vertex has moved more than ``redetect_share``
+x margin since the last detection, the step keeps that detection's contacts, in the same order, with the same
+lists and W_z, and only measures them again at x (:func:`refresh_contacts`: closest points, normals and weights, as
+``narrow.write_contacts`` writes them) and carries each contact's impulse to itself (:func:`refresh_impulses`).
+
+What that keeps: a segment distance changes by at most the larger displacement of each segment's ends, so every
+pair now within r_a + r_b + (1 - 2 ``redetect_share``) margin was within reach at the detection (a contact, unless
+its edges had more than ``max_contacts_per_edge`` closer ones).  The default, a quarter, keeps every pair within
+half the margin, as a detection with half the margin would: a 40 um margin instead of 100 um measured the same
+penetrations, strain and drift on the grooming benchmark (2026-12-07).  Bodies, kinematic vertices, the time step
+and gravity must be as at the detection (else the step detects): ``ContactPipeline._reuse_key``.
+"""
+
+import taichi as ti
+
+from .colliders import body_transform
+from .grid import contact_normal, segment_closest_points
+from .narrow import _body_reach, _delassus, entry_coefficient, store_entry_coefficients, store_push
+
+vec3 = ti.math.vec3
+vec4 = ti.types.vector(4, float)
+
+
+@ti.kernel
+def max_displacement(x: ti.template(), x_ref: ti.template()) -> float:
+    """max_i |x_i - x_ref,i| [m]."""
+    m = 0.0
+    for i in x:
+        ti.atomic_max(m, (x[i] - x_ref[i]).norm())
+    return m
+
+
+@ti.kernel
+def refresh_contacts(x: ti.template(), radius: ti.template(), cs: ti.template(), con: ti.template(),
+                     hair_friction: float):
+    """Every contact measured again at x, as the detection writes it (``narrow.write_contacts``): a hair pair (edges
+    a, b) its closest points, normal, weights and u_kin = -thickness n; a body contact (vertex a, collider k) the
+    body point and normal at the end-of-step transform.  Thicknesses, vertices and colliders are kept."""
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for c in range(nc):
+        vtx = con.contact_vertex[c]
+        k = con.contact_collider[c]
+        a = vtx[0]
+        if k < 0:
+            b = vtx[2]
+            s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+            pa = x[a] + s * (x[a + 1] - x[a])
+            pb = x[b] + t * (x[b + 1] - x[b])
+            nrm = contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
+            con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
+            con.contact_normal[c] = nrm
+            con.contact_kinematic[c] = -con.contact_thickness[c] * nrm
+            con.contact_friction[c] = hair_friction
+        else:
+            q, d, nq = _body_reach(cs, k, x[a])
+            Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+            n_end = Re @ nq
+            con.contact_normal[c] = n_end
+            con.contact_kinematic[c] = -(Re @ (q - d * nq) + Te) - radius[a] * n_end
+            con.contact_friction[c] = cs.collider_friction[k]
+
+
+@ti.kernel
+def refresh_impulses(con: ti.template(), warm: ti.template(), split_by_batch: ti.template(), coefficients: ti.template()):
+    """D_hat and the pushes of the measured contacts (the lists and W_z are the detection's), fresh corrections, each
+    hair pair's impulse of the last step, r~ = r D_hat (``contact.warm``: the same contact, so the same index; body
+    contacts start from zero, as there), and the collision duals lambda_z = W_z^-1 H^T D_hat^-1 r~."""
+    nc = ti.min(con.contact_count[None], con.capacity)
+    for c in range(nc):
+        dh = _delassus(con, c, split_by_batch)
+        con.contact_delassus[c] = dh
+        r = vec3(0.0)
+        if con.contact_collider[c] < 0:
+            r = warm.warm_impulse[c] * dh
+        con.contact_accumulated[c] = r
+        con.contact_delta[c] = vec3(0.0)
+        con.contact_status[c] = 0
+        store_push(con, c)
+    for k in range(con.active_vertex_count[None]):
+        i = con.active_vertex[k]
+        iw = con.vertex_contact_inv_weight[i]
+        lam = vec3(0.0)
+        if iw > 0.0:
+            for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
+                c = con.vertex_contact_list[e]
+                lam += (iw * entry_coefficient(con, i, c)) * con.contact_accumulated[c]
+        con.vertex_contact_dual[i] = lam
+    if ti.static(coefficients):
+        store_entry_coefficients(con)
+
+
+def reuse_key(pl, dt: float, gravity, dynamic: bool):
+    """What a kept detection must share with the step of pipeline ``pl``, or None where none is kept: the quasistatic
+    mode, ``redetect_share`` > 0, no hair-hair search in rounds; the time step, gravity, margin and mass splitting,
+    the kinematic vertices, and still bodies and colliders (their transforms and the strands they act on)."""
+    import numpy as np
+
+    cfg, cs = pl.config, pl.colliders
+    if dynamic or cfg.redetect_share <= 0.0 or pl.pair_rounds_last > 1:
+        return None
+    rb, re = cs.body_rotation_begin.to_numpy(), cs.body_rotation_end.to_numpy()
+    tb, te = cs.body_translation_begin.to_numpy(), cs.body_translation_end.to_numpy()
+    if not (np.array_equal(rb, re) and np.array_equal(tb, te)):
+        return None
+    return (float(dt), tuple(float(c) for c in gravity), cfg.margin, cfg.mass_splitting, rb.tobytes(), tb.tobytes(),
+            cs.collider_strands.to_numpy().tobytes(), pl.model.vertex.vertex_is_fixed.to_numpy().tobytes())
+
+
+def kept_contacts(pl, x, key) -> bool:
+    """Keep the last detection's contacts for this step of pipeline ``pl`` where ``key`` (:func:`reuse_key`) matches
+    the detection's, its impulses were kept (``contact.warm``) and no vertex has moved more than ``redetect_share`` x
+    margin since: measure them at x, carry each impulse to itself.  Returns whether it did."""
+    from ..config import MassSplitting
+
+    cfg = pl.config
+    if key is None or key != pl._detection_key or not pl._warm_valid or pl._warm is None:
+        return False
+    if max_displacement(x, pl._detected_at) > cfg.redetect_share * cfg.margin:
+        return False
+    refresh_contacts(x, pl.vertex_radius, pl.colliders, pl.con, cfg.friction)
+    refresh_impulses(pl.con, pl._warm, cfg.mass_splitting == MassSplitting.BATCH, pl.uses_batches(False))
+    pl.late_body_contacts = pl.continuous_contacts = pl.capped_queries = pl.ccd_skipped = 0
+    pl.contacts_reused = True
+    pl.reuse_count += 1
+    return True
