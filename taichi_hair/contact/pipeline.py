@@ -13,7 +13,7 @@ from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, build_adjacency, count_contacts, write_contacts)
 from .projection import SLAB_ORDER, SLABS, warn_soft_rest_lengths
-from .reuse import kept_contacts, reuse_key
+from .reuse import kept_contacts, prepare_reuse, reuse_key
 
 #: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial_contacts``) [-].  Measured
 #: on 2 cores (2026-12-05, bit-identical either way): the head turn (6,148 contacts) 761 -> 529 ms per frame, the
@@ -136,7 +136,7 @@ class ContactPipeline:
         #: Kept detections (``contact.reuse``): what the last detection shares with the steps that may keep its contacts
         #: (None: none may), the positions it ran at [m] (vertex_count,), whether the last step kept them, and how
         #: many steps did since the pipeline was made.
-        self._detection_key, self.contacts_reused, self.reuse_count = None, False, 0
+        self._detection_key, self.contacts_reused, self.reuse_count, self._reuse_ready = None, False, 0, False
         self._detected_at = ti.Vector.field(3, float, n)
         self._late_count = (ti.field(ti.i32, n + 1) if config.late_body_contacts and self.colliders.count > 0
                             else None)
@@ -341,6 +341,8 @@ class ContactPipeline:
         self._dt, self._gn, self._dynamic = dt, gn, dynamic
         if key is not None:  # (kept for the next steps: ``contact.reuse``)
             self._detected_at.copy_from(x)
+            if not self._reuse_ready:
+                prepare_reuse(self, x)
         self._detection_key, self.contacts_reused = key, False
         return total
 
