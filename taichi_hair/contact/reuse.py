@@ -97,8 +97,9 @@ def refresh_impulses(con: ti.template(), warm: ti.template(), split_by_batch: ti
 
 def reuse_key(pl, dt: float, gravity, dynamic: bool):
     """What a kept detection must share with the step of pipeline ``pl``, or None where none is kept: the quasistatic
-    mode, ``redetect_share`` > 0, no hair-hair search in rounds; the time step, gravity, margin and mass splitting,
-    the kinematic vertices, and still bodies and colliders (their transforms and the strands they act on)."""
+    mode, ``redetect_share`` > 0, no hair-hair search in rounds; the time step, gravity, the contact options the
+    detection's contacts and weights depend on, the kinematic vertices, and still bodies and colliders (their
+    transforms and the strands they act on)."""
     import numpy as np
 
     cfg, cs = pl.config, pl.colliders
@@ -108,7 +109,8 @@ def reuse_key(pl, dt: float, gravity, dynamic: bool):
     tb, te = cs.body_translation_begin.to_numpy(), cs.body_translation_end.to_numpy()
     if not (np.array_equal(rb, re) and np.array_equal(tb, te)):
         return None
-    return (float(dt), tuple(float(c) for c in gravity), cfg.margin, cfg.mass_splitting, rb.tobytes(), tb.tobytes(),
+    return (float(dt), tuple(float(c) for c in gravity), cfg.margin, cfg.mass_splitting, cfg.weight_time, cfg.hair_hair,
+            cfg.keep_rest_overlaps, cfg.max_contacts_per_edge, rb.tobytes(), tb.tobytes(),
             cs.collider_strands.to_numpy().tobytes(), pl.model.vertex.vertex_is_fixed.to_numpy().tobytes())
 
 
