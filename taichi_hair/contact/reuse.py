@@ -21,7 +21,8 @@ import taichi as ti
 
 from .colliders import body_transform
 from .grid import contact_normal, segment_closest_points
-from .narrow import _body_reach, _delassus, entry_coefficient, store_entry_coefficients, store_push
+from .narrow import _body_reach, _delassus, store_entry_coefficients, store_push
+from .warm import duals_of_impulses
 
 vec3 = ti.math.vec3
 vec4 = ti.types.vector(4, float)
@@ -82,15 +83,7 @@ def refresh_impulses(con: ti.template(), warm: ti.template(), split_by_batch: ti
         con.contact_delta[c] = vec3(0.0)
         con.contact_status[c] = 0
         store_push(con, c)
-    for k in range(con.active_vertex_count[None]):
-        i = con.active_vertex[k]
-        iw = con.vertex_contact_inv_weight[i]
-        lam = vec3(0.0)
-        if iw > 0.0:
-            for e in range(con.vertex_contact_start[i], con.vertex_contact_start[i + 1]):
-                c = con.vertex_contact_list[e]
-                lam += (iw * entry_coefficient(con, i, c)) * con.contact_accumulated[c]
-        con.vertex_contact_dual[i] = lam
+    duals_of_impulses(con)
     if ti.static(coefficients):
         store_entry_coefficients(con)
 

@@ -64,6 +64,13 @@ def warm_impulses(con: ti.template(), warm: ti.template()):
                 o = warm.warm_order[j]
                 if warm.warm_key_b[o] == b:
                     con.contact_accumulated[c] = warm.warm_impulse[o] * con.contact_delassus[c]
+    duals_of_impulses(con)
+
+
+@ti.func
+def duals_of_impulses(con: ti.template()):
+    """lambda_z = W_z^-1 H^T D_hat^-1 r~ on every contact vertex: the pushes of the contacts' impulses r~ (so that the
+    z-step still starts at x, ``projection.begin_projection``)."""
     for k in range(con.active_vertex_count[None]):
         i = con.active_vertex[k]
         iw = con.vertex_contact_inv_weight[i]
