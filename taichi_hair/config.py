@@ -306,16 +306,13 @@ class ContactConfig:
             follow one another Gauss-Seidel style).  The same fixed point; ``"batch"`` converges faster where vertices have
             many contacts (measured on the hairball, ``BENCHMARKS.md``).
         redetect_share: a quasistatic step keeps the last detection's contacts, measured again, while no vertex has
-            moved more than this share of ``margin`` since, the bodies still (``contact.reuse``); 0 detects every step [-].
-        continuous_detections: continuous-time detections per step (Sec. 4.5:
-            ACCD, the two earliest impacts per edge), run at regular
-            intervals of the ADMM iterations (the paper's "CT" hairball uses
-            3) and once more before the final geometric correction; 0 uses
-            proximity detection only [-].
-        skip_when_apart: skip the hair-hair candidate search of a step in
-            which no two strands come within reach and no strand can touch
-            itself (exact: ``grid.strands_apart``); the statistics
-            count the skipped steps [-].
+            moved more than this share of ``margin`` since, the bodies still (``contact.reuse``); 0 detects every step;
+            under 0.5 (every pair within (1 - 2 share) margin is kept) [-].
+        continuous_detections: continuous-time detections per step (Sec. 4.5: ACCD, the two earliest impacts per edge),
+            run at regular intervals of the ADMM iterations (the paper's "CT" hairball uses 3) and once more before the
+            final geometric correction; 0 uses proximity detection only [-].
+        skip_when_apart: skip the hair-hair candidate search of a step in which no two strands come within reach and no
+            strand can touch itself (exact: ``grid.strands_apart``); the statistics count the skipped steps [-].
         skip_slow_continuous: skip a continuous-detection pass when twice
             the largest displacement since the beginning of the step is
             within ``margin`` (pairs out of proximity reach cannot have met;
@@ -412,6 +409,8 @@ class ContactConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"ContactConfig.{name} must be a finite number >= 0, got {v!r}")
+        if self.redetect_share >= 0.5:
+            raise ValueError(f"ContactConfig.redetect_share must be < 0.5, got {self.redetect_share!r}")
         for name, lo in (("max_contacts_per_edge", 1), ("projection_iterations", 1), ("correction_iterations", 0),
                         ("continuous_detections", 0), ("correction_relinearize_every", 0)):
             v = getattr(self, name)

@@ -667,6 +667,9 @@ def test_bad_collider_parameters_name_the_field():
     for bad in (-1e-4, float("nan"), float("inf"), "1"):
         with pytest.raises(ValueError, match="ContactConfig.pair_skin"):
             ContactConfig(pair_skin=bad)
+    for bad in (-0.1, 0.5, float("nan"), "0.25"):
+        with pytest.raises(ValueError, match="ContactConfig.redetect_share"):
+            ContactConfig(redetect_share=bad)
     with pytest.raises(ValueError, match="body 3 does not exist"):
         ColliderSet([SphereCollider(body=3)], 1)
 

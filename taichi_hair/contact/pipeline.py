@@ -547,7 +547,7 @@ class ContactPipeline:
         A hair pair is measured past its contact thickness: r_a + r_b, or its rest distance where the pair
         was closer at rest (``ContactConfig.keep_rest_overlaps``); ``rest_overlap_contacts`` counts those.
         ``pair_skin_edges_searched``: edges that searched for pairs in the last detection with ``pair_skin``
-        (-1 without a skin).
+        (-1 without a skin); ``contacts_reused``: whether the step kept the last detection's contacts (``contact.reuse``).
         """
         import numpy as np
 
