@@ -129,18 +129,10 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
             if _emits(grid, a, k):
                 if c < cap:
                     b = grid.edge_candidate[a, k]
-                    s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-                    pa = x[a] + s * (x[a + 1] - x[a])
-                    pb = x[b] + t * (x[b + 1] - x[b])
-                    nrm = contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
-                    r = pair_thickness(vertex, radius, a, b, keep_rest_overlaps)
-                    con.contact_thickness[c] = r
+                    con.contact_thickness[c] = pair_thickness(vertex, radius, a, b, keep_rest_overlaps)
                     con.contact_vertex[c] = ivec4(a, a + 1, b, b + 1)
-                    con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
-                    con.contact_normal[c] = nrm
-                    con.contact_kinematic[c] = -r * nrm
-                    con.contact_friction[c] = hair_friction
                     con.contact_collider[c] = -1
+                    measure_hair_contact(x, con, c, a, b, hair_friction)
                 c += 1
         cb = n_hair + grid.vertex_body_emit_count[a]
         # Only where ``count_contacts`` counted body contacts (the same tests, so the same ones): the collider
@@ -153,17 +145,39 @@ def write_contacts(vertex: ti.template(), strand: ti.template(), x: ti.template(
                 if (d < radius[a] + margin + sweep * v[a].norm() + fall + _body_sweep(cs, k, q)
                         and acts_on(cs, k, vertex.vertex_strand[a])):
                     if cb < cap:
-                        Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
-                        s_end = Re @ (q - d * nq) + Te
-                        n_end = Re @ nq
                         con.contact_vertex[cb] = ivec4(a, -1, -1, -1)
                         con.contact_weight[cb] = vec4(1.0, 0.0, 0.0, 0.0)
-                        con.contact_normal[cb] = n_end
-                        con.contact_kinematic[cb] = -s_end - radius[a] * n_end
                         con.contact_thickness[cb] = radius[a]
-                        con.contact_friction[cb] = cs.collider_friction[k]
                         con.contact_collider[cb] = k
+                        measure_body_contact(radius, cs, con, cb, a, k, q, d, nq)
                     cb += 1
+
+
+@ti.func
+def measure_hair_contact(x: ti.template(), con: ti.template(), c: ti.i32, a: ti.i32, b: ti.i32, hair_friction: float):
+    """Hair pair c of edges a and b at x: its closest points' weights, the normal (``grid.contact_normal``), u_kin =
+    -thickness n and the friction (the detection's, and a kept contact's again: ``contact.reuse``)."""
+    s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
+    pa = x[a] + s * (x[a + 1] - x[a])
+    pb = x[b] + t * (x[b + 1] - x[b])
+    nrm = contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
+    con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
+    con.contact_normal[c] = nrm
+    con.contact_kinematic[c] = -con.contact_thickness[c] * nrm
+    con.contact_friction[c] = hair_friction
+
+
+@ti.func
+def measure_body_contact(radius: ti.template(), cs: ti.template(), con: ti.template(), c: ti.i32, a: ti.i32, k: ti.i32,
+                         q, d, nq):
+    """Body contact c of vertex a with collider k, from its point q in the body frame, distance d and normal nq at the
+    begin-of-step transform (``_body_reach``): the body point and normal carried to the end-of-step transform, u_kin
+    and the collider's friction (the detection's, and a kept contact's again: ``contact.reuse``)."""
+    Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
+    n_end = Re @ nq
+    con.contact_normal[c] = n_end
+    con.contact_kinematic[c] = -(Re @ (q - d * nq) + Te) - radius[a] * n_end
+    con.contact_friction[c] = cs.collider_friction[k]
 
 
 @ti.func

@@ -19,13 +19,11 @@ and gravity must be as at the detection (else the step detects): ``ContactPipeli
 
 import taichi as ti
 
-from .colliders import body_transform
-from .grid import contact_normal, segment_closest_points
-from .narrow import _body_reach, _delassus, store_entry_coefficients, store_push
+from .narrow import (_body_reach, _delassus, measure_body_contact, measure_hair_contact, store_entry_coefficients,
+                     store_push)
 from .warm import duals_of_impulses
 
 vec3 = ti.math.vec3
-vec4 = ti.types.vector(4, float)
 
 
 @ti.kernel
@@ -45,26 +43,13 @@ def refresh_contacts(x: ti.template(), radius: ti.template(), cs: ti.template(),
     body point and normal at the end-of-step transform.  Thicknesses, vertices and colliders are kept."""
     nc = ti.min(con.contact_count[None], con.capacity)
     for c in range(nc):
-        vtx = con.contact_vertex[c]
+        a = con.contact_vertex[c][0]
         k = con.contact_collider[c]
-        a = vtx[0]
         if k < 0:
-            b = vtx[2]
-            s, t, dist = segment_closest_points(x[a], x[a + 1], x[b], x[b + 1])
-            pa = x[a] + s * (x[a + 1] - x[a])
-            pb = x[b] + t * (x[b + 1] - x[b])
-            nrm = contact_normal(pa - pb, x[a + 1] - x[a], x[b + 1] - x[b])
-            con.contact_weight[c] = vec4(1.0 - s, s, -(1.0 - t), -t)
-            con.contact_normal[c] = nrm
-            con.contact_kinematic[c] = -con.contact_thickness[c] * nrm
-            con.contact_friction[c] = hair_friction
+            measure_hair_contact(x, con, c, a, con.contact_vertex[c][2], hair_friction)
         else:
             q, d, nq = _body_reach(cs, k, x[a])
-            Re, Te = body_transform(cs.body_rotation_end, cs.body_translation_end, cs.collider_body[k])
-            n_end = Re @ nq
-            con.contact_normal[c] = n_end
-            con.contact_kinematic[c] = -(Re @ (q - d * nq) + Te) - radius[a] * n_end
-            con.contact_friction[c] = cs.collider_friction[k]
+            measure_body_contact(radius, cs, con, c, a, k, q, d, nq)
 
 
 @ti.kernel
