@@ -4,14 +4,16 @@ Run from the repository root on any run's output folder (``taichi-hair simulate 
     python3 benchmarks/probes/strand_order.py DIR [--within 1e-3]
 
 For every pair of edges of two different strands that cross within ``--within`` metres of each other in the first
-AND the last frame, with their closest points inside both edges (not at an end), the sign of
-(e_a x e_b) . (c_a - c_b) (c the closest points) says which strand passes over the other.  Non-penetrating strands
-cannot change that sign without one going around the other's free end, so a flipped pair is a reordering that no
-restoring force undoes: the rest pose holds each strand's own shape, and contacts keep the new order.  Also printed:
-the p90 drift by vertex index, the mean displacement (the groom's centroid) and its spread, and the radius of
-gyration of each vertex index's cross-section, first and last frame.  Uniform strand lengths are assumed (vertices
-/ strands per strand), as in the generated grooms and the ponytail.
-"""
+AND the last frame, with their closest points inside both edges (not at an end), crossing at ``--angle`` degrees or
+more in both frames, the sign of (e_a x e_b) . (c_a - c_b) (c the closest points) says which strand passes over the
+other.  Non-penetrating strands cannot change that sign without one going around the other's free end, or without
+the two edges turning through parallel (e_a x e_b reverses while neither strand passes the other); pairs whose
+crossing normal e_a x e_b turned by more than 60 degrees between the two frames are left out for that reason, and
+what is left is still measured on two frames only, not tracked in between: read "flipped" as an estimate.  A flipped
+pair is a reordering that no restoring force undoes: the rest pose holds each strand's own shape, and contacts keep
+the new order.  Also printed: the p90 drift by vertex index, the mean displacement (the groom's centroid) and its
+spread, and the radius of gyration of each vertex index's cross-section, first and last frame.  Uniform strand
+lengths are assumed (vertices / strands per strand), as in the generated grooms and the ponytail."""
 
 import argparse
 import json
@@ -39,6 +41,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("run", help="a simulate --out folder (frames.npz, summary.json)")
     ap.add_argument("--within", type=float, default=1e-3, help="largest crossing distance of a pair counted [m]")
+    ap.add_argument("--angle", type=float, default=10.0, help="smallest crossing angle of a pair counted, both frames [deg]")
     args = ap.parse_args(argv)
     with np.load(os.path.join(args.run, "frames.npz")) as z:
         frames = z["positions" if "positions" in z.files else z.files[0]].astype(np.float64)
@@ -58,10 +61,17 @@ def main(argv=None) -> int:
     seen = []
     for x in (x0, x1):
         ca, cb, dist, sa, sb = closest_points(x[a], x[a + 1], x[b], x[b + 1])
-        side = np.sign(np.einsum("ij,ij->i", np.cross(x[a + 1] - x[a], x[b + 1] - x[b]), ca - cb))
+        ta = (x[a + 1] - x[a]) / np.linalg.norm(x[a + 1] - x[a], axis=1)[:, None]
+        tb = (x[b + 1] - x[b]) / np.linalg.norm(x[b + 1] - x[b], axis=1)[:, None]
+        normal = np.cross(ta, tb)
+        sine = np.linalg.norm(normal, axis=1)
+        normal /= np.maximum(sine, 1e-30)[:, None]
+        side = np.sign(np.einsum("ij,ij->i", normal, ca - cb))
         inner = (sa > 0.02) & (sa < 0.98) & (sb > 0.02) & (sb < 0.98)
-        seen.append(((dist < args.within) & inner & (side != 0), side))
-    counted = seen[0][0] & seen[1][0]
+        seen.append(((dist < args.within) & inner & (side != 0) & (sine > np.sin(np.radians(args.angle))), side, normal))
+    # The sign can also change by the two edges turning through parallel between the frames (e_a x e_b reverses
+    # while neither passes the other): only pairs whose crossing normal kept its direction (within 60 degrees) count.
+    counted = seen[0][0] & seen[1][0] & (np.einsum("ij,ij->i", seen[0][2], seen[1][2]) > 0.5)
     flipped = counted & (seen[0][1] != seen[1][1])
     pairs = {(int(i), int(j)) for i, j in zip(strand[a[counted]], strand[b[counted]])}
     flips = {(int(i), int(j)) for i, j in zip(strand[a[flipped]], strand[b[flipped]])}
