@@ -214,12 +214,18 @@ class GuideSimulation:
         control = model.control()
         control.gravity = tuple(cfg.gravity)
         skin = None
+        self._rest_buffers = []
         if guides.size < g.strand_count:
             rest = g.rest_points.astype(np.float64)
             polylines = [rest[off[s]:off[s + 1]] for s in range(g.strand_count)]
             skin = SkinningLBS(model, guides, polylines,
                                SkinningConfig(neighbour_count=min(cfg.neighbour_count, int(guides.size))),
                                strand_body=0)
+            # Two float64 copies of the render rest points for the edits' rebinds, touched now (the binding
+            # takes the skinning's per-strand copy, so ``rest`` is free to be one of them).
+            spare = np.empty_like(rest)
+            np.copyto(spare, rest)
+            self._rest_buffers = [rest, spare]
         guide_vertex = np.concatenate([np.arange(off[s], off[s + 1]) for s in guides])
         row_of = np.full(g.vertex_count, -1, dtype=np.int64)
         row_of[guide_vertex] = np.arange(guide_vertex.size)
@@ -252,8 +258,7 @@ class GuideSimulation:
         self._shape_key = None  # (new rest pose, new contact weights: the shape springs are computed again)
         self.apply_live_parameters(cfg)  # (the gravity the rest pose was solved for; after the new contact weights)
         if self.skin is not None:
-            rest = g.rest_points.astype(np.float64)
-            rest.flags.writeable = False  # (ours alone: the binding takes it without another copy)
+            rest = self._render_rest(g.rest_points)  # (read-only, ours alone: the binding takes it without a copy)
             off = np.asarray(g.strand_offsets)
             counts = np.diff(off)
             if counts.size and np.all(counts == counts[0]):  # one (strands, vertices, 3) array: no per-strand slices
@@ -263,6 +268,24 @@ class GuideSimulation:
         self.base_fixed = host["vertex_is_fixed"].copy()
         self.base_body = host["vertex_body_position"].copy()
         self.stale = False
+
+    def _render_rest(self, points: np.ndarray) -> np.ndarray:
+        """``points`` (the groom's rest points) as float64, read-only, in whichever of the two buffers kept for it
+        the skinning's binding does not hold.  A new 1.2 M-vertex array (29 MB) costs its page faults on the first
+        touch: ``astype`` took 42 ms of the grooming benchmark's edit, the copy into a buffer touched before ~2 ms
+        (NumPy's huge pages off, as in the app).  A buffer of another shape, or none, is allocated anew."""
+        held = self.skin.host["render_vertex_rest_position"]
+        free = [k for k, b in enumerate(self._rest_buffers) if not np.may_share_memory(b, held)]
+        k = free[0] if free else len(self._rest_buffers)
+        if k == len(self._rest_buffers):
+            self._rest_buffers.append(None)
+        buf = self._rest_buffers[k]
+        if buf is None or buf.shape != points.shape:
+            buf = self._rest_buffers[k] = np.empty(points.shape, np.float64)
+        buf.flags.writeable = True
+        np.copyto(buf, points)
+        buf.flags.writeable = False
+        return buf
 
     def _solve_rest_pose(self, config, before=None, rebuilt=None) -> None:
         """With ``config.rest_pose == "sag-free"``: the guides' rest pose solved for the session's gravity
