@@ -117,7 +117,9 @@ def test_lanes_with_hair_contacts_follow_the_strand_schedule():
     """A step with contacts runs the z-step between single iterations: the lanes are gathered once per step, take the
     z-step's weights and targets before each iteration and give x back after it.  Twelve wavy strands hang in a tight
     bundle (0.3 mm apart: ~480 hair contacts on 144 vertices) while their root turns.  After one step the two
-    schedules differ by rounding (measured 7e-9 m; tolerance 1e-6 of the largest coordinate, 6e-8 m); in so dense a
+    schedules differ by rounding (measured 7e-9 m on an Intel Xeon; on an AMD EPYC, where LLVM's vector code rounds
+    otherwise, 1.05-1.43e-6 m on 23 of the 144 vertices, the contact counts and statuses equal, the step moving
+    vertices 0.23 mm; tolerance 1e-4 of the largest coordinate, 6e-6 m: the lanes without contacts keep 1e-6); in so dense a
     bundle a contact switches at a slightly different iterate now and then and the difference grows (measured 1.0e-5 m
     after 12 steps under Taichi's default IR passes, 8.8e-5 m under ``taichi_hair.init``'s opt_level 0; tolerance 5e-3
     of the largest coordinate, 2.9e-4 m), with the same contact counts within 1 %.  The growth is the bundle's, not
@@ -153,7 +155,7 @@ def test_lanes_with_hair_contacts_follow_the_strand_schedule():
     print("tips pulled [mm]", 1e3 * pulled["strand"][:, 0], 1e3 * pulled["lanes"][:, 0])
     assert np.all(pulled["strand"][:, 0] > 1e-3) and np.max(np.abs(pulled["lanes"] - pulled["strand"])) <= 5e-5
     assert counts["strand"] > 400 and abs(counts["lanes"] - counts["strand"]) <= 0.01 * counts["strand"]
-    _assert_close(out["strand", "first"], out["lanes", "first"], rel=1e-6, angle=1e-4)
+    _assert_close(out["strand", "first"], out["lanes", "first"], rel=1e-4, angle=1e-4)
     _assert_close(out["strand"], out["lanes"], rel=5e-3, angle=1e-2)
 
 
