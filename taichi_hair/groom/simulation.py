@@ -272,8 +272,9 @@ class GuideSimulation:
     def _render_rest(self, points: np.ndarray) -> np.ndarray:
         """``points`` (the groom's rest points) as float64, read-only, in whichever of the two buffers kept for it
         the skinning's binding does not hold.  A new 1.2 M-vertex array (29 MB) costs its page faults on the first
-        touch: ``astype`` took 42 ms of the grooming benchmark's edit, the copy into a buffer touched before ~2 ms
-        (NumPy's huge pages off, as in the app).  A buffer of another shape, or none, is allocated anew."""
+        touch: timed side by side inside the grooming benchmark's edits (NumPy's huge pages off, as in the app),
+        ``astype`` took 12-20 ms, the copy into a buffer touched before 3.4-4.5 ms (cProfile had charged ``astype``
+        42 ms).  A buffer of another shape, or none, is allocated anew."""
         held = self.skin.host["render_vertex_rest_position"]
         free = [k for k, b in enumerate(self._rest_buffers) if not np.may_share_memory(b, held)]
         k = free[0] if free else len(self._rest_buffers)
