@@ -53,12 +53,7 @@ class GroomingConfig:
         neighbour_count: guides each skinned strand follows [-].
         seed: seed of the guide selection [-].
         contacts: hair-hair proximity contacts on or off.
-        contact_margin: proximity margin of the contact detection [m].  80 um: the still groom of
-            ``benchmarks/bench_groom.py`` (8,600 sag-free guides) keeps 139k contacts instead of 153k at 100 um (84 %
-            of them separating) and still keeps the last detection's contacts in 35 of 36 steps
-            (``ContactConfig.redetect_share``: every pair within 40 um stays in the set); one process, blocks of 6 steps
-            alternating 100 / 60 / 80 um (BENCHMARKS.md, 2026-12-07): median step with skinning 290 / 272 / 269 ms, the
-            deepest hair pair 12.0 / 8.7 / 7.9 um, crossed pairs at most 4 / 2 / 2.
+        contact_margin: proximity margin of the contact detection [m].
         w0: scale of the ADMM elasticity weights [-] (SolverADMMConfig.w0).  Measured on 12
             strands x 10 vertices, 10 cm, 10 iterations per frame: 1 settles the sag to 3 % in 10
             frames and holds a strand dragged by its tip still; 0.2 settles faster but a strand
@@ -104,7 +99,7 @@ class GroomingConfig:
     neighbour_count: int = 4
     seed: int = 0
     contacts: bool = True
-    contact_margin: float = 8.0e-5
+    contact_margin: float = 1.0e-4
     w0: float = 1.0
     rest_pose: str = "authored"
     rest_max_change: float = 1.9
