@@ -549,6 +549,7 @@ def test_repeated_in_place_updates_equal_a_fresh_session_as_the_rest_buffers_alt
     b.advance(3)
     assert same_groom(a.groom, b.groom)
 
+
 def test_proxy_is_the_nearest_arc_fraction_on_the_nearest_guide():
     """With guide_ratio < 1 a skinned vertex acts through its proxy (vectorised map): a vertex of the
     nearest guide (by root) with the nearest rest arc fraction."""
