@@ -20,8 +20,9 @@ an edit: ``scale_length`` on 10 % of the strands followed by one frame, i.e. the
 ``--edit spread`` (default) takes every 10th strand, all over the head (about half the render strands are
 bound to an edited guide and are bound again); ``--edit region`` the 10 % whose roots are nearest one root
 (a brush stroke's selection: only the region and its border are bound again).  The process is set up as the
-grooming app's (``--numpy-huge-pages app``, default: NumPy's huge-page advice off, see
-``taichi_hair.cli.common.no_numpy_huge_pages``); ``--numpy-huge-pages numpy`` keeps NumPy's default.
+grooming app's (``--numpy-huge-pages app``, default: NumPy's huge-page advice off and glibc keeping freed memory, see
+``taichi_hair.cli.common.no_numpy_huge_pages`` and ``keep_freed_memory``); ``--numpy-huge-pages numpy`` keeps NumPy's
+and glibc's defaults.
 
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
@@ -67,8 +68,9 @@ def main(argv=None):
     p.add_argument("--edit", choices=["spread", "region"], default="spread",
                    help="which 10 %% of the strands the edit takes: every 10th, or those rooted nearest one root")
     p.add_argument("--numpy-huge-pages", choices=("app", "numpy"), default="app",
-                   help="app: as the grooming app and the command line do (NumPy's huge-page advice off, "
-                        "taichi_hair.cli.common.no_numpy_huge_pages); numpy: NumPy's own default")
+                   help="app: as the grooming app and the command line do (NumPy's huge-page advice off, glibc keeping "
+                        "freed memory: taichi_hair.cli.common.no_numpy_huge_pages, keep_freed_memory); numpy: NumPy's "
+                        "and glibc's own defaults")
     p.add_argument("--drawing", choices=("auto", "lines", "raster"), default="auto",
                    help="ViewerGGUI(drawing=...): GGUI lines or the Taichi rasteriser (auto: raster on a CPU arch)")
     p.add_argument("--out", default=None)
@@ -81,9 +83,10 @@ def main(argv=None):
 
     taichi_hair.init(arch=getattr(ti, args.arch), default_fp=ti.f32, log_level=ti.WARN)
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
-    from taichi_hair.cli.common import no_numpy_huge_pages
+    from taichi_hair.cli.common import keep_freed_memory, no_numpy_huge_pages
 
     huge_pages_off = no_numpy_huge_pages() if args.numpy_huge_pages == "app" else False
+    freed_kept = keep_freed_memory() if args.numpy_huge_pages == "app" else False
     from taichi_hair.groom.generators import HEAD_MESH_PATH, GeneratorConfig, generate_groom, load_head, read_obj_groups
     from taichi_hair.groom.session import GroomingConfig, GroomingSession
     from taichi_hair.render import CameraConfig, ViewerGGUI, strand_colors
@@ -91,7 +94,7 @@ def main(argv=None):
     res = {"arch": arch, "strands": args.strands, "vertices_per_strand": args.vertices,
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
            "schedule": args.schedule, "rest_pose": args.rest_pose,
-           "numpy_huge_pages_off": huge_pages_off,
+           "numpy_huge_pages_off": huge_pages_off, "keep_freed_memory": freed_kept,
            "image": list(args.size), "date": datetime.date.today().isoformat()}
 
     with stopwatch(ti.sync) as sw:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import os
 import sys
 
@@ -24,6 +25,7 @@ def _init_taichi(arch: str, precision: str):
     init(arch=archs[arch], default_fp=fp, log_level=ti.WARN)
     lighter_kernel_positions()
     no_numpy_huge_pages()
+    keep_freed_memory()
     used = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
     return ti, used
 
@@ -100,6 +102,45 @@ def no_numpy_huge_pages() -> bool:
     switch(False)
     return True
 
+
+
+#: Environment switch: set to 1 to keep glibc's own malloc thresholds (:func:`keep_freed_memory`); glibc's
+#: ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_``, where set, are also left as the user set them.
+STOCK_MALLOC_ENV = "TAICHI_HAIR_STOCK_MALLOC"
+#: glibc's largest mmap threshold on 64-bit (4 MiB x sizeof(long)) and the trim threshold :func:`keep_freed_memory` sets [B].
+MALLOC_MMAP_THRESHOLD = 32 << 20
+MALLOC_TRIM_THRESHOLD = 1 << 30
+
+
+def keep_freed_memory() -> bool:
+    """Let glibc keep the memory NumPy frees for the next arrays instead of handing it back to the kernel: arrays up to
+    32 MiB come from the heap (``M_MMAP_THRESHOLD``), and freed heap memory up to 1 GiB stays mapped
+    (``M_TRIM_THRESHOLD``).  Returns whether it applied.
+
+    Why: by default glibc maps each large array anew and unmaps it when freed, or trims the heap past twice the
+    largest array freed, so the next array's first touch page-faults again, at a few microseconds a page on the VM.
+    A grooming edit makes and drops many such arrays (the groom's 1.2 M vertices are 14-29 MB per array). Measured
+    on the 2-core VM (2026-12-07, three pairs of processes, each pair alternating; the first two pairs a scratch
+    form of ``benchmarks/probes/groom_edit_malloc.py [--keep]``, the third the probe itself; the grooming
+    benchmark's groom, 4 edits of 8,600 strands each): host + update of the first edit 0.60 / 0.68 / 0.74 s stock,
+    0.52 / 0.53 / 0.75 s with this; the three edits after it 0.44-0.50 / 0.45 / 0.49-0.58 s stock, 0.38-0.44 /
+    0.36-0.41 / 0.43-0.47 s with this; peak memory 1,431-1,432 against 1,437 MB.  So the later edits gain ~10 %, the
+    first one did in two of the three pairs.  What it costs: a process keeps up to 1 GiB of freed memory mapped (it
+    is reused, not grown, by the next arrays).  Applied by the command line and the grooming app with ``ti.init``;
+    the library never applies it.  Skipped where the C library has no ``mallopt`` (not glibc: musl's does nothing
+    and returns 0), when ``TAICHI_HAIR_STOCK_MALLOC=1``, or where the user set glibc's own variables."""
+    if os.environ.get(STOCK_MALLOC_ENV) == "1" or any(
+            k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")):
+        return False
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+    m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
+    return mallopt(m_mmap_threshold, MALLOC_MMAP_THRESHOLD) == 1 and mallopt(m_trim_threshold, MALLOC_TRIM_THRESHOLD) == 1
 
 def _atomic_savez(path: str, **arrays):
     tmp = path + ".tmp.npz"
