@@ -125,10 +125,12 @@ def keep_freed_memory() -> bool:
     benchmark's groom, 4 edits of 8,600 strands each): host + update of the first edit 0.60 / 0.68 / 0.74 s stock,
     0.52 / 0.53 / 0.75 s with this; the three edits after it 0.44-0.50 / 0.45 / 0.49-0.58 s stock, 0.38-0.44 /
     0.36-0.41 / 0.43-0.47 s with this; peak memory 1,431-1,432 against 1,437 MB.  So the later edits gain ~10 %, the
-    first one did in two of the three pairs.  What it costs: a process keeps up to 1 GiB of freed memory mapped (it
-    is reused, not grown, by the next arrays).  Applied by the command line and the grooming app with ``ti.init``;
-    the library never applies it.  Skipped where the C library has no ``mallopt`` (not glibc: musl's does nothing
-    and returns 0), when ``TAICHI_HAIR_STOCK_MALLOC=1``, or where the user set glibc's own variables."""
+    first one did in two of the three pairs.  What it costs: a process's resident memory stays near its peak instead
+    of shrinking when arrays are freed (up to 1 GiB of freed memory is kept for the next arrays; the peak itself
+    does not grow), per process: a batch's workers each keep theirs.  Applied by the command line and the grooming
+    app with ``ti.init``; the library never applies it.  Skipped where the C library has no ``mallopt`` (not glibc:
+    musl's does nothing and returns 0), when ``TAICHI_HAIR_STOCK_MALLOC=1``, or where the user set glibc's own
+    variables."""
     if os.environ.get(STOCK_MALLOC_ENV) == "1" or any(
             k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")):
         return False
