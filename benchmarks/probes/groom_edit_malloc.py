@@ -13,8 +13,16 @@ four such processes, alternating.
 """
 
 import argparse
+import os
+import runpy
 import resource
 import time
+
+
+def grooming_session(strands: int):
+    """``groom_step_profile.grooming_session`` (the grooming benchmark's groom and session, built), run by its path."""
+    return runpy.run_path(os.path.join(os.path.dirname(os.path.abspath(__file__)), "groom_step_profile.py"))[
+        "grooming_session"](strands)
 
 
 def main(argv=None) -> int:
@@ -23,24 +31,12 @@ def main(argv=None) -> int:
     ap.add_argument("--edits", type=int, default=4)
     ap.add_argument("--strands", type=int, default=86000)
     args = ap.parse_args(argv)
-    from taichi_hair.cli.common import keep_freed_memory, no_numpy_huge_pages
+    from taichi_hair.cli.common import keep_freed_memory
 
     kept = keep_freed_memory() if args.keep else False
     import numpy as np
-    import taichi as ti
 
-    import taichi_hair
-
-    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, log_level=ti.WARN)
-    no_numpy_huge_pages()
-    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
-    from taichi_hair.groom.session import GroomingConfig, GroomingSession
-
-    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=args.strands, vertices_per_strand=14,
-                                                        length=0.25, seed=0))
-    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
-                                                    rest_pose="sag-free"))
-    session._ensure_built()
+    ti, groom, session = grooming_session(args.strands)
     sim = session._sim
 
     def frame() -> float:

@@ -15,9 +15,17 @@ count, the deepest hair pair, the most crossed pairs of a step and the median co
 """
 
 import argparse
+import os
+import runpy
 import time
 
 import numpy as np
+
+
+def grooming_session(strands: int):
+    """``groom_step_profile.grooming_session`` (the grooming benchmark's groom and session, built), run by its path."""
+    return runpy.run_path(os.path.join(os.path.dirname(os.path.abspath(__file__)), "groom_step_profile.py"))[
+        "grooming_session"](strands)
 
 
 def main(argv=None) -> int:
@@ -28,21 +36,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     margins = [float(v) for v in args.margins.split(",")]
 
-    import taichi as ti
-
-    import taichi_hair
-
-    taichi_hair.init(arch=ti.cpu, default_fp=ti.f32, log_level=ti.WARN)
-    from taichi_hair.cli.common import no_numpy_huge_pages
-    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
-    from taichi_hair.groom.session import GroomingConfig, GroomingSession
-
-    no_numpy_huge_pages()
-    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=args.strands, vertices_per_strand=14,
-                                                        length=0.25, seed=0))
-    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
-                                                    rest_pose="sag-free"))
-    session._ensure_built()
+    ti, _, session = grooming_session(args.strands)
     sim = session._sim
     pl = sim.solver.contacts
 

@@ -20,6 +20,29 @@ import re
 import time
 
 
+
+def grooming_session(strands: int, schedule: str = "auto", **init):
+    """Taichi started (``taichi_hair.init`` on the CPU, f32, ``init`` passed on), NumPy's huge-page advice off as in the
+    app, and the grooming benchmark's groom (wavy strands x 14 vertices on ``assets/head.obj``) in a built session of
+    10 % sag-free guides with hair-hair contacts and 10 iterations per step.  Returns ``(ti, groom, session)``.  The
+    grooming probes (``groom_margin_ab.py``, ``groom_edit_malloc.py``) load this file by its path for it."""
+    import taichi as ti
+
+    import taichi_hair
+
+    taichi_hair.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN, **init)
+    from taichi_hair.cli.common import no_numpy_huge_pages
+    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
+    from taichi_hair.groom.session import GroomingConfig, GroomingSession
+
+    no_numpy_huge_pages()
+    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=strands, vertices_per_strand=14,
+                                                        length=0.25, seed=0))
+    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
+                                                    rest_pose="sag-free", schedule=schedule))
+    session._ensure_built()
+    return ti, groom, session
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--strands", type=int, default=86000)
@@ -29,21 +52,7 @@ def main() -> int:
     ap.add_argument("--tasks", default=None, help="regular expression: split these kernels by task")
     ap.add_argument("--json", default=None)
     a = ap.parse_args()
-    import taichi as ti
-
-    import taichi_hair
-
-    taichi_hair.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN, kernel_profiler=True)
-    from taichi_hair.cli.common import no_numpy_huge_pages
-    from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
-    from taichi_hair.groom.session import GroomingConfig, GroomingSession
-
-    no_numpy_huge_pages()
-    groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=a.strands, vertices_per_strand=14,
-                                                        length=0.25, seed=0))
-    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
-                                                    rest_pose="sag-free", schedule=a.schedule))
-    session._ensure_built()
+    ti, _, session = grooming_session(a.strands, a.schedule, kernel_profiler=True)
     sim = session._sim
     for _ in range(3):
         sim.step()
