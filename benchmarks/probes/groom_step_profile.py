@@ -20,7 +20,6 @@ import re
 import time
 
 
-
 def grooming_session(strands: int, schedule: str = "auto", **init):
     """Taichi started (``taichi_hair.init`` on the CPU, f32, ``init`` passed on), NumPy's huge-page advice off as in the
     app, and the grooming benchmark's groom (wavy strands x 14 vertices on ``assets/head.obj``) in a built session of
@@ -42,6 +41,7 @@ def grooming_session(strands: int, schedule: str = "auto", **init):
                                                     rest_pose="sag-free", schedule=schedule))
     session._ensure_built()
     return ti, groom, session
+
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -103,7 +103,6 @@ def no_numpy_huge_pages() -> bool:
     return True
 
 
-
 #: Environment switch: set to 1 to keep glibc's own malloc thresholds (:func:`keep_freed_memory`); glibc's
 #: ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_``, where set, are also left as the user set them.
 STOCK_MALLOC_ENV = "TAICHI_HAIR_STOCK_MALLOC"
@@ -143,6 +142,7 @@ def keep_freed_memory() -> bool:
     mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
     m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
     return mallopt(m_mmap_threshold, MALLOC_MMAP_THRESHOLD) == 1 and mallopt(m_trim_threshold, MALLOC_TRIM_THRESHOLD) == 1
+
 
 def _atomic_savez(path: str, **arrays):
     tmp = path + ".tmp.npz"

@@ -274,16 +274,11 @@ class GuideSimulation:
         the skinning's binding does not hold.  A new 1.2 M-vertex array (29 MB) costs its page faults on the first
         touch: timed side by side inside the grooming benchmark's edits (NumPy's huge pages off, as in the app),
         ``astype`` took 12-20 ms, the copy into a buffer touched before 3.4-4.5 ms (cProfile had charged ``astype``
-        42 ms).  The price: the two buffers stay allocated (58 MB for that groom).  A buffer of another shape, or
-        none, is allocated anew."""
+        42 ms).  The price: the two buffers stay allocated (58 MB for that groom)."""
         held = self.skin.host["render_vertex_rest_position"]
-        free = [k for k, b in enumerate(self._rest_buffers) if not np.may_share_memory(b, held)]
-        k = free[0] if free else len(self._rest_buffers)
-        if k == len(self._rest_buffers):
-            self._rest_buffers.append(None)
-        buf = self._rest_buffers[k]
-        if buf is None or buf.shape != points.shape:
-            buf = self._rest_buffers[k] = np.empty(points.shape, np.float64)
+        buf = next((b for b in self._rest_buffers if b.shape == points.shape and not np.may_share_memory(b, held)), None)
+        if buf is None:  # (not after an edit of the same layout, which is all ``update`` takes: a new array then)
+            buf = np.empty(points.shape, np.float64)
         buf.flags.writeable = True
         np.copyto(buf, points)
         buf.flags.writeable = False
