@@ -4,14 +4,15 @@ is projected onto the contacts, with the edge lengths held, re-linearised every 
 deeper than the tolerance or a cap of sweeps is reached.
 """
 
+import numpy as np
 import taichi as ti
 
 from ..config import CorrectionEdgeOrder, CorrectionLengths, MassSplitting
 from ..solver_base import on_gpu
 
 from .narrow import SPLIT_NONE, relinearize_contacts
-from .projection import (chebyshev_step, contact_statistics, correction_end, correction_sweep,
-                         hold_lengths_sweep, projection_begin, projection_sweep, store_edge_lengths)
+from .projection import (contact_statistics, correction_end, correction_sweep, hold_lengths_sweep, projection_begin,
+                         projection_sweep, store_edge_lengths)
 
 #: Edge-length passes that end the length-holding correction (:func:`correct`), before each
 #: depth check.  8, not 4: measured (24 frames of assets/scenes/head_turn.toml) strain p99 / max 0.042 / 0.29 %
@@ -141,3 +142,53 @@ def _restart(pl, x, x0, split, frictionless) -> None:
     relinearize_contacts(x, x0, pl.vertex_radius, pl.colliders, pl.con, split, frictionless,
                          pl.uses_batches(pl._dynamic))
     projection_begin(x, pl.con, True)
+
+
+@ti.kernel
+def chebyshev_step(vertex: ti.template(), con: ti.template(), prev: ti.template(), cur: ti.template(), omega: float,
+                   first: ti.template(), serial: ti.template()):
+    """Chebyshev semi-iterative acceleration of the correction's sweeps (Wang 2015, for position-based
+    projections): z_{k+1} = omega (z~_{k+1} - z_{k-1}) + z_{k-1}, with z~ the sweep's result; ``prev`` and
+    ``cur`` hold z_{k-1} and z_k and move on by one.  ``first``: only record z (omega unused); ``serial``: on
+    the launching thread."""
+    ti.loop_config(serialize=serial)
+    for i in range(con.vertex_z.shape[0]):
+        zt = con.vertex_z[i]
+        if ti.static(first):
+            prev[i] = zt
+            cur[i] = zt
+        elif vertex.vertex_is_fixed[i] == 0:
+            zn = omega * (zt - prev[i]) + prev[i]
+            prev[i] = cur[i]
+            cur[i] = zn
+            con.vertex_z[i] = zn
+
+
+#: The end-of-step correction's "rest" lengths take the rest length for the length: warn when a material
+#: stretches more than this under its own weight (the root strain rho g L / E_s of a hanging strand) [-].
+SOFT_STRETCH_WARNING = 1.0e-3
+
+
+def warn_soft_rest_lengths(model, config) -> None:
+    """A warning naming the softest strand when ``correction_lengths="rest"`` would erase a real stretch."""
+    if config.correction_lengths != CorrectionLengths.REST:
+        return
+    h = model.host
+    le = np.asarray(h["edge_rest_length"], np.float64)
+    real = le > 0
+    strand = h["vertex_strand"]
+    ns = model.strand_count
+    area = np.asarray(h["strand_area"], np.float64)[strand]
+    e_s = np.zeros_like(le)
+    e_s[real] = np.asarray(h["edge_stretch_stiffness"], np.float64)[real] / (area[real] * le[real])
+    length = np.bincount(strand, weights=le, minlength=ns)
+    e_min = np.full(ns, np.inf)
+    np.minimum.at(e_min, strand[real], e_s[real])
+    strain = np.asarray(h["strand_density"], np.float64) * 9.81 * length / e_min
+    s = int(np.argmax(strain))
+    if strain[s] > SOFT_STRETCH_WARNING:
+        import warnings
+
+        warnings.warn(f"strand {s} stretches by {100 * strain[s]:.2g} % under its own weight (rho g L / E_s), but "
+                      "ContactConfig.correction_lengths='rest' holds every edge at its rest length after contacts: "
+                      "use correction_lengths='before' to keep a soft material's stretch", stacklevel=3)

@@ -12,7 +12,8 @@ from ..config import CorrectionContactOrder, MassSplitting, WeightTime
 from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, build_adjacency, count_contacts, write_contacts)
-from .projection import SLAB_ORDER, SLABS, warn_soft_rest_lengths
+from .correction import warn_soft_rest_lengths
+from .projection import SLAB_ORDER, SLABS
 from .reuse import kept_contacts, prepare_reuse, reuse_key
 
 #: Contacts under which the contact sweeps run serially on the CPU (``ContactPipeline._serial_contacts``) [-].  Measured

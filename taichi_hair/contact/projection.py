@@ -30,10 +30,8 @@ C_mu: r~ in the friction cone, u_N >= 0, r~_N u_N = 0, and either u_T = 0
 * slide: r~ = -w_N n - mu (-w_N) w_T/|w_T|, u = w_T (1 - mu (-w_N)/|w_T|).
 """
 
-import numpy as np
 import taichi as ti
 
-from ..config import CorrectionLengths
 from ..fields import CONTACT_BATCHES, CONTACT_SLABS
 from .colliders import body_transform, collider_distance
 
@@ -548,53 +546,3 @@ def hold_lengths_sweep(vertex: ti.template(), edge: ti.template(), strand: ti.te
     """The edge lengths ``passes`` more times (``hold_lengths``; one launch), after the last contact sweep of the
     correction; ``serial``: on the launching thread (a small model, ``ContactPipeline.correct``)."""
     hold_lengths(vertex, edge, strand, con.vertex_z, length, along_strands, serial, passes)
-
-
-@ti.kernel
-def chebyshev_step(vertex: ti.template(), con: ti.template(), prev: ti.template(), cur: ti.template(), omega: float,
-                   first: ti.template(), serial: ti.template()):
-    """Chebyshev semi-iterative acceleration of the correction's sweeps (Wang 2015, for position-based
-    projections): z_{k+1} = omega (z~_{k+1} - z_{k-1}) + z_{k-1}, with z~ the sweep's result; ``prev`` and
-    ``cur`` hold z_{k-1} and z_k and move on by one.  ``first``: only record z (omega unused); ``serial``: on
-    the launching thread."""
-    ti.loop_config(serialize=serial)
-    for i in range(con.vertex_z.shape[0]):
-        zt = con.vertex_z[i]
-        if ti.static(first):
-            prev[i] = zt
-            cur[i] = zt
-        elif vertex.vertex_is_fixed[i] == 0:
-            zn = omega * (zt - prev[i]) + prev[i]
-            prev[i] = cur[i]
-            cur[i] = zn
-            con.vertex_z[i] = zn
-
-
-#: The end-of-step correction's "rest" lengths take the rest length for the length: warn when a material
-#: stretches more than this under its own weight (the root strain rho g L / E_s of a hanging strand) [-].
-SOFT_STRETCH_WARNING = 1.0e-3
-
-
-def warn_soft_rest_lengths(model, config) -> None:
-    """A warning naming the softest strand when ``correction_lengths="rest"`` would erase a real stretch."""
-    if config.correction_lengths != CorrectionLengths.REST:
-        return
-    h = model.host
-    le = np.asarray(h["edge_rest_length"], np.float64)
-    real = le > 0
-    strand = h["vertex_strand"]
-    ns = model.strand_count
-    area = np.asarray(h["strand_area"], np.float64)[strand]
-    e_s = np.zeros_like(le)
-    e_s[real] = np.asarray(h["edge_stretch_stiffness"], np.float64)[real] / (area[real] * le[real])
-    length = np.bincount(strand, weights=le, minlength=ns)
-    e_min = np.full(ns, np.inf)
-    np.minimum.at(e_min, strand[real], e_s[real])
-    strain = np.asarray(h["strand_density"], np.float64) * 9.81 * length / e_min
-    s = int(np.argmax(strain))
-    if strain[s] > SOFT_STRETCH_WARNING:
-        import warnings
-
-        warnings.warn(f"strand {s} stretches by {100 * strain[s]:.2g} % under its own weight (rho g L / E_s), but "
-                      "ContactConfig.correction_lengths='rest' holds every edge at its rest length after contacts: "
-                      "use correction_lengths='before' to keep a soft material's stretch", stacklevel=3)
