@@ -51,6 +51,8 @@ def main(argv=None):
     p.add_argument("--vertices", type=int, default=14)
     p.add_argument("--guide-ratio", type=float, default=0.1)
     p.add_argument("--iterations", type=int, default=10)
+    p.add_argument("--contact-sweeps", type=int, default=None, help="GroomingConfig.contact_sweeps (its default if unset)")
+    p.add_argument("--correction-sweeps", type=int, default=None, help="GroomingConfig.correction_sweeps (default if unset)")
     p.add_argument("--contacts", choices=["on", "off"], default="on")
     p.add_argument("--frames", type=int, default=5, help="measured frames (after 2 warm-up frames)")
     p.add_argument("--size", type=int, nargs=2, default=(960, 720))
@@ -105,8 +107,11 @@ def main(argv=None):
     cfg = GroomingConfig(iterations=args.iterations, guide_ratio=args.guide_ratio,
                          contacts=args.contacts == "on", autosave_every=0, schedule=args.schedule,
                          rest_pose=args.rest_pose,
+                         **({} if args.contact_sweeps is None else {"contact_sweeps": args.contact_sweeps}),
+                         **({} if args.correction_sweeps is None else {"correction_sweeps": args.correction_sweeps}),
                          **({} if args.rest_max_change is None else {"rest_max_change": args.rest_max_change}),
                          **({} if args.unheld_shape_weight is None else {"unheld_shape_weight": args.unheld_shape_weight}))
+    res["contact_sweeps"], res["correction_sweeps"] = cfg.contact_sweeps, cfg.correction_sweeps
     session = GroomingSession(groom, cfg)
     with stopwatch(ti.sync) as sw:
         session._ensure_built()

@@ -64,7 +64,8 @@ def same_groom(a, b):
 
 def test_config_validation_names_the_field():
     for name, bad in (("youngs_modulus", -1.0), ("friction", float("nan")), ("iterations", 0),
-                      ("guide_ratio", 1.5), ("gravity", (0, 1)), ("contacts", "yes"), ("w0", 0.0)):
+                      ("guide_ratio", 1.5), ("gravity", (0, 1)), ("contacts", "yes"), ("w0", 0.0),
+                      ("contact_sweeps", 0), ("correction_sweeps", 1.5)):
         with pytest.raises(ValueError, match=name):
             GroomingConfig(**{name: bad})
     s = session()
@@ -493,6 +494,20 @@ def test_contacts_on_a_sphere_collider():
     all_dist = np.linalg.norm(s.groom.points.astype(np.float64) - center, axis=1)
     assert abs(q["body_penetration_max_m"] - max(0.0, radius - all_dist.min())) < 1e-6
     assert q["crossed_pairs_worst"] >= q["crossed_pairs"] >= 0
+
+
+def test_contact_sweeps_reach_the_solver_and_change_live():
+    """GroomingConfig.contact_sweeps and correction_sweeps are the solver's ContactConfig.projection_iterations and
+    correction_iterations, at the build and after set_parameter (applied to the running solver, no rebuild)."""
+    s = GroomingSession(polylines(), GroomingConfig(guide_ratio=1.0, contacts=True, contact_sweeps=3, correction_sweeps=7,
+                                                    autosave_every=0))
+    s._ensure_built()
+    c = s._sim.solver.contacts.config
+    assert (c.projection_iterations, c.correction_iterations) == (3, 7)
+    s.set_parameter("contact_sweeps", 1)
+    s.set_parameter("correction_sweeps", 4)
+    assert (c.projection_iterations, c.correction_iterations) == (1, 4) and s.rebuild_count == 1
+    assert GroomingConfig().contact_sweeps == 1 and GroomingConfig().correction_sweeps == 5  # the tool's defaults
 
 
 def test_simulation_off_leaves_the_groom_alone():

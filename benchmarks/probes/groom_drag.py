@@ -11,9 +11,10 @@ position) with ``--stiffness`` for ``--frames`` frames, then releases them for `
 frame: its time, the correction's sweeps, the hair pairs crossed and the hair-pair penetration p99 / max of the step
 (``GroomingSession.quality``); after the drag, how far the selected vertices moved along the drag (their targets
 moved offset (1 - (1 - stiffness)^frames)).  ``--correction-cap`` sets ``ContactConfig.correction_max_iterations``
-of the session's solver.  The crossed pairs are those of the pairs within reach at each step's beginning: a strand
-pulled farther than that in one step can pass through another unseen.  A diagnostic, not a benchmark: one run, the
-frame times are those of a shared machine.
+of the session's solver, ``--contact-sweeps`` and ``--correction-sweeps`` those of ``GroomingConfig`` (after the first
+4 frames).  The crossed pairs are those of the pairs within reach at each step's beginning: a strand pulled farther
+than that in one step can pass through another unseen.  A diagnostic, not a benchmark: one run, the frame times are
+those of a shared machine.
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=int, default=12)
     p.add_argument("--release-frames", type=int, default=8)
     p.add_argument("--correction-cap", type=int, default=None)
+    p.add_argument("--contact-sweeps", type=int, default=None)
+    p.add_argument("--correction-sweeps", type=int, default=None)
     p.add_argument("--strands", type=int, default=86000)
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
@@ -61,6 +64,10 @@ def main(argv=None) -> int:
     session.advance(4)
     if args.correction_cap is not None:
         session._sim.solver.contacts.config.correction_max_iterations = args.correction_cap
+    if args.contact_sweeps is not None:
+        session.set_parameter("contact_sweeps", args.contact_sweeps)
+    if args.correction_sweeps is not None:
+        session.set_parameter("correction_sweeps", args.correction_sweeps)
     g = session.groom
     centre = g.points[g.strand_offsets[100] + 7].astype(np.float64)
     direction = centre / np.linalg.norm(centre)

@@ -24,7 +24,7 @@ def grooming_session(strands: int, schedule: str = "auto", **init):
     """Taichi started (``taichi_hair.init`` on the CPU, f32, ``init`` passed on), NumPy's huge-page advice off as in the
     app, and the grooming benchmark's groom (wavy strands x 14 vertices on ``assets/head.obj``) in a built session of
     10 % sag-free guides with hair-hair contacts and 10 iterations per step.  Returns ``(ti, groom, session)``.  The
-    grooming probes (``groom_margin_ab.py``, ``groom_edit_malloc.py``) load this file by its path for it."""
+    grooming probes (``groom_config_ab.py``, ``groom_edit_malloc.py``) load this file by its path for it."""
     import taichi as ti
 
     import taichi_hair

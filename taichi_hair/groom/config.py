@@ -54,6 +54,16 @@ class GroomingConfig:
         seed: seed of the guide selection [-].
         contacts: hair-hair proximity contacts on or off.
         contact_margin: proximity margin of the contact detection [m].
+        contact_sweeps: Gauss-Seidel sweeps over the contacts in each ADMM iteration's z-step
+            (``ContactConfig.projection_iterations``, 2 in the paper's hairball) [-].  The grooming tool is quasistatic:
+            it shows each frame's unconverged iterate (the paper, Sec. 5.3), so 1.
+        correction_sweeps: sweeps of the end-of-step correction before it first checks the depth
+            (``ContactConfig.correction_iterations``, 10 in the paper's hairball; it goes on, 5 sweeps at a time, while a
+            hair pair is deeper than the tolerance) [-].  Measured together (2026-12-07, the grooming benchmark's groom,
+            ``benchmarks/probes/groom_config_ab.py``, alternating blocks in one process): 1 and 5 sweeps take 263 ms per
+            still step (simulation and skinning) against 357 ms for 2 and 10, the deepest hair pair 10.6 against 11.7 um;
+            after 24 still frames the drift p90 (0.016 mm) and strain (max 1e-6) were the same, and a 30 mm drag moved
+            its vertices 20.4-20.6 mm for every setting tried (BENCHMARKS.md, "Fewer contact sweeps for grooming").
         w0: scale of the ADMM elasticity weights [-] (SolverADMMConfig.w0).  Measured on 12
             strands x 10 vertices, 10 cm, 10 iterations per frame: 1 settles the sag to 3 % in 10
             frames and holds a strand dragged by its tip still; 0.2 settles faster but a strand
@@ -100,6 +110,8 @@ class GroomingConfig:
     seed: int = 0
     contacts: bool = True
     contact_margin: float = 1.0e-4
+    contact_sweeps: int = 1
+    correction_sweeps: int = 5
     w0: float = 1.0
     rest_pose: str = "authored"
     rest_max_change: float = 1.9
@@ -126,8 +138,8 @@ class GroomingConfig:
         if len(g) != 3 or not all(math.isfinite(c) for c in g):
             raise ValueError(f"GroomingConfig.gravity must be 3 finite numbers [m/s^2], got {self.gravity!r}")
         self.gravity = g
-        for name, lo in (("iterations", 1), ("neighbour_count", 1), ("autosave_every", 0), ("undo_limit", 0),
-                         ("seed", 0)):
+        for name, lo in (("iterations", 1), ("contact_sweeps", 1), ("correction_sweeps", 1), ("neighbour_count", 1),
+                         ("autosave_every", 0), ("undo_limit", 0), ("seed", 0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo):
                 raise ValueError(f"GroomingConfig.{name} must be an integer >= {lo}, got {v!r}")

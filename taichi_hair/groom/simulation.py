@@ -205,7 +205,8 @@ class GuideSimulation:
         # Proximity only (Sec. 5.3): no velocity-dependent margin growth.  The pipeline always exists:
         # it holds the comb, an idle collider on its own body until a stroke enables it.
         contacts = ContactConfig(hair_hair=cfg.contacts, friction=cfg.friction, margin=cfg.contact_margin,
-                                 velocity_margin=0.0, pair_skin=PAIR_SKIN_MARGINS * cfg.contact_margin)
+                                 velocity_margin=0.0, pair_skin=PAIR_SKIN_MARGINS * cfg.contact_margin,
+                                 projection_iterations=cfg.contact_sweeps, correction_iterations=cfg.correction_sweeps)
         comb = CapsuleCollider(p0=(0.0, 0.0, 0.0), p1=(0.0, 0.0, 0.0), radius=1.0e-3, friction=0.0, body=COMB_BODY,
                                strands=(0, 1))
         solver = SolverADMM(model, replace(self.solver_config, contacts=contacts), colliders=list(colliders) + [comb])
@@ -317,11 +318,14 @@ class GuideSimulation:
             apply_rest_pose(self.model, result)
 
     def apply_live_parameters(self, config) -> None:
-        """Gravity, iterations, friction and the unheld guides' shape springs of ``config`` into the running solver."""
+        """Gravity, iterations, friction, contact sweeps and the unheld guides' shape springs of ``config`` into the
+        running solver."""
         self.control.gravity = tuple(config.gravity)
         self.solver.config.iterations = config.iterations
         if self.solver.contacts is not None:
             self.solver.contacts.config.friction = config.friction
+            self.solver.contacts.config.projection_iterations = config.contact_sweeps
+            self.solver.contacts.config.correction_iterations = config.correction_sweeps
         if config.unheld_shape_weight != self.shape_weight:
             self.shape_weight = config.unheld_shape_weight
             self.drag_springs(self._drag_position)
