@@ -507,7 +507,7 @@ def test_contact_sweeps_reach_the_solver_and_change_live():
     s.set_parameter("contact_sweeps", 1)
     s.set_parameter("correction_sweeps", 4)
     assert (c.projection_iterations, c.correction_iterations) == (1, 4) and s.rebuild_count == 1
-    assert GroomingConfig().contact_sweeps == 1 and GroomingConfig().correction_sweeps == 5  # the tool's defaults
+    assert GroomingConfig().contact_sweeps == 1 and GroomingConfig().correction_sweeps == 10  # the tool's defaults
 
 
 def test_simulation_off_leaves_the_groom_alone():

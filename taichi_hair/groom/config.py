@@ -55,15 +55,16 @@ class GroomingConfig:
         contacts: hair-hair proximity contacts on or off.
         contact_margin: proximity margin of the contact detection [m].
         contact_sweeps: Gauss-Seidel sweeps over the contacts in each ADMM iteration's z-step
-            (``ContactConfig.projection_iterations``, 2 in the paper's hairball) [-].  The grooming tool is quasistatic:
-            it shows each frame's unconverged iterate (the paper, Sec. 5.3), so 1.
+            (``ContactConfig.projection_iterations``, 2 in the paper's hairball) [-].  The grooming tool is quasistatic
+            and shows each frame's unconverged iterate (the paper, Sec. 5.3), so 1: measured 2026-12-07 on the grooming
+            benchmark's groom, 293 against 348 ms per still step (simulation and skinning; ``benchmarks/probes/
+            groom_config_ab.py``, alternating blocks in one process) and 0.83 of the frame time in two pairs of
+            ``bench_groom.py`` runs, with the same drift (p90 0.015-0.016 mm), strain (max 1e-6) and drag (a 30 mm
+            drag moved its vertices 20.2-20.6 mm) (BENCHMARKS.md, "Fewer contact sweeps for grooming").
         correction_sweeps: sweeps of the end-of-step correction before it first checks the depth
-            (``ContactConfig.correction_iterations``, 10 in the paper's hairball; it goes on, 5 sweeps at a time, while a
-            hair pair is deeper than the tolerance) [-].  Measured together (2026-12-07, the grooming benchmark's groom,
-            ``benchmarks/probes/groom_config_ab.py``, alternating blocks in one process): 1 and 5 sweeps take 263 ms per
-            still step (simulation and skinning) against 357 ms for 2 and 10, the deepest hair pair 10.6 against 11.7 um;
-            after 24 still frames the drift p90 (0.016 mm) and strain (max 1e-6) were the same, and a 30 mm drag moved
-            its vertices 20.4-20.6 mm for every setting tried (BENCHMARKS.md, "Fewer contact sweeps for grooming").
+            (``ContactConfig.correction_iterations``; it goes on, 5 sweeps at a time, while a hair pair is deeper than
+            the tolerance) [-].  10, the paper's: 5 saved time on a settled groom but, in the frames after a build,
+            failed its first check and took 15 where 10 sufficed (same section).
         w0: scale of the ADMM elasticity weights [-] (SolverADMMConfig.w0).  Measured on 12
             strands x 10 vertices, 10 cm, 10 iterations per frame: 1 settles the sag to 3 % in 10
             frames and holds a strand dragged by its tip still; 0.2 settles faster but a strand
@@ -111,7 +112,7 @@ class GroomingConfig:
     contacts: bool = True
     contact_margin: float = 1.0e-4
     contact_sweeps: int = 1
-    correction_sweeps: int = 5
+    correction_sweeps: int = 10
     w0: float = 1.0
     rest_pose: str = "authored"
     rest_max_change: float = 1.9
