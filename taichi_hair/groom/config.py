@@ -57,7 +57,7 @@ class GroomingConfig:
         contact_sweeps: Gauss-Seidel sweeps over the contacts in each ADMM iteration's z-step
             (``ContactConfig.projection_iterations``, 2 in the paper's hairball) [-].  The grooming tool is quasistatic
             and shows each frame's unconverged iterate (the paper, Sec. 5.3), so 1: measured 2026-12-07 on the grooming
-            benchmark's groom, 293 against 348 ms per still step (simulation and skinning; ``benchmarks/probes/
+            benchmark's groom, 293 and 297 against 348 and 343 ms per still step (simulation and skinning; ``benchmarks/probes/
             groom_config_ab.py``, alternating blocks in one process) and 0.83 of the frame time in two pairs of
             ``bench_groom.py`` runs, with the same drift (p90 0.015-0.016 mm), strain (max 1e-6) and drag (a 30 mm
             drag moved its vertices 20.2-20.6 mm) (BENCHMARKS.md, "Fewer contact sweeps for grooming").
