@@ -19,17 +19,8 @@ groom, so each one's quality figures follow the others' steps too: a diagnostic 
 """
 
 import argparse
-import os
-import runpy
-import time
 
 import numpy as np
-
-
-def grooming_session(strands: int):
-    """``groom_step_profile.grooming_session`` (the grooming benchmark's groom and session, built), run by its path."""
-    return runpy.run_path(os.path.join(os.path.dirname(os.path.abspath(__file__)), "groom_step_profile.py"))[
-        "grooming_session"](strands)
 
 
 def main(argv=None) -> int:
@@ -40,7 +31,9 @@ def main(argv=None) -> int:
     ap.add_argument("--strands", type=int, default=86000)
     args = ap.parse_args(argv)
     names = args.field.split(":")
-    kinds = [int if f.endswith(("iterations", "every")) else float for f in names]
+    from taichi_hair.config import ContactConfig
+
+    kinds = [type(getattr(ContactConfig(), f)) for f in names]  # (int or float, as the field's default)
     values = [tuple(k(x) for k, x in zip(kinds, v.split(":"), strict=True)) for v in args.values.split(",")]
 
     def label(v) -> str:
@@ -50,16 +43,14 @@ def main(argv=None) -> int:
         for f, x in zip(names, v):
             setattr(pl.config, f, x)
 
+    from groom_step_profile import grooming_session, timed_frame  # (this folder: a script's own comes first)
+
     ti, _, session = grooming_session(args.strands)
     sim = session._sim
     pl = sim.solver.contacts
 
     def step() -> float:
-        t = time.perf_counter()
-        sim.step()
-        sim.skin.deform(sim.state, sim.control)
-        ti.sync()
-        return time.perf_counter() - t
+        return timed_frame(ti, sim)
 
     for m in values:
         apply(m)

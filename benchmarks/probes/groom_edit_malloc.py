@@ -13,16 +13,8 @@ four such processes, alternating.
 """
 
 import argparse
-import os
-import runpy
 import resource
 import time
-
-
-def grooming_session(strands: int):
-    """``groom_step_profile.grooming_session`` (the grooming benchmark's groom and session, built), run by its path."""
-    return runpy.run_path(os.path.join(os.path.dirname(os.path.abspath(__file__)), "groom_step_profile.py"))[
-        "grooming_session"](strands)
 
 
 def main(argv=None) -> int:
@@ -36,15 +28,13 @@ def main(argv=None) -> int:
     kept = keep_freed_memory() if args.keep else False
     import numpy as np
 
+    from groom_step_profile import grooming_session, timed_frame  # (this folder: a script's own comes first)
+
     ti, groom, session = grooming_session(args.strands)
     sim = session._sim
 
     def frame() -> float:
-        t = time.perf_counter()
-        sim.step()
-        sim.skin.deform(sim.state, sim.control)
-        ti.sync()
-        return time.perf_counter() - t
+        return timed_frame(ti, sim)
 
     frame()
     frame()

@@ -24,7 +24,7 @@ def grooming_session(strands: int, schedule: str = "auto", **init):
     """Taichi started (``taichi_hair.init`` on the CPU, f32, ``init`` passed on), NumPy's huge-page advice off as in the
     app, and the grooming benchmark's groom (wavy strands x 14 vertices on ``assets/head.obj``) in a built session of
     10 % sag-free guides with hair-hair contacts and 10 iterations per step.  Returns ``(ti, groom, session)``.  The
-    grooming probes (``groom_config_ab.py``, ``groom_edit_malloc.py``) load this file by its path for it."""
+    grooming probes (``groom_config_ab.py``, ``groom_edit_malloc.py``) import it and ``timed_frame`` from here."""
     import taichi as ti
 
     import taichi_hair
@@ -41,6 +41,15 @@ def grooming_session(strands: int, schedule: str = "auto", **init):
                                                     rest_pose="sag-free", schedule=schedule))
     session._ensure_built()
     return ti, groom, session
+
+
+def timed_frame(ti, sim) -> float:
+    """One still frame of the grooming tool, simulation and skinning, synchronised: its wall time [s]."""
+    t = time.perf_counter()
+    sim.step()
+    sim.skin.deform(sim.state, sim.control)
+    ti.sync()
+    return time.perf_counter() - t
 
 
 def main() -> int:
