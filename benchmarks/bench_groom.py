@@ -22,7 +22,8 @@ bound to an edited guide and are bound again); ``--edit region`` the 10 % whose 
 (a brush stroke's selection: only the region and its border are bound again).  The process is set up as the
 grooming app's (``--numpy-huge-pages app``, default: NumPy's huge-page advice off and glibc keeping freed memory, see
 ``taichi_hair.cli.common.no_numpy_huge_pages`` and ``keep_freed_memory``); ``--numpy-huge-pages numpy`` keeps NumPy's
-and glibc's defaults.
+and glibc's defaults.  Taichi starts as in the app too: ``taichi_hair.init`` and ``cli.common.lighter_kernel_positions``
+(a cheaper frontend; ``TAICHI_HAIR_STOCK_POSITIONS=1`` keeps Taichi's own, as for the app).
 
 Usage:
     python benchmarks/bench_groom.py [--arch cpu|cuda] [--strands 86000] [--vertices 14] [--frames 5]
@@ -85,7 +86,10 @@ def main(argv=None):
 
     taichi_hair.init(arch=getattr(ti, args.arch), default_fp=ti.f32, log_level=ti.WARN)
     arch = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
-    from taichi_hair.cli.common import keep_freed_memory, no_numpy_huge_pages
+    from taichi_hair.cli.common import keep_freed_memory, lighter_kernel_positions, no_numpy_huge_pages
+
+    # As the grooming app starts Taichi (cli.common._init_taichi): its first frame is the one measured.
+    light_positions = lighter_kernel_positions()
 
     huge_pages_off = no_numpy_huge_pages() if args.numpy_huge_pages == "app" else False
     freed_kept = keep_freed_memory() if args.numpy_huge_pages == "app" else False
@@ -97,6 +101,7 @@ def main(argv=None):
            "guide_ratio": args.guide_ratio, "iterations": args.iterations, "contacts": args.contacts,
            "schedule": args.schedule, "rest_pose": args.rest_pose,
            "numpy_huge_pages_off": huge_pages_off, "keep_freed_memory": freed_kept,
+           "lighter_kernel_positions": light_positions,
            "image": list(args.size), "date": datetime.date.today().isoformat()}
 
     with stopwatch(ti.sync) as sw:

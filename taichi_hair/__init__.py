@@ -66,6 +66,7 @@ __all__ = [
     "interpolation_error",
     "error_colors",
     "init",
+    "memoize_kernel_sources",
     "TAICHI_INIT_OPTIONS",
 ]
 __version__ = "0.1.0"
@@ -83,10 +84,67 @@ __version__ = "0.1.0"
 TAICHI_INIT_OPTIONS = {"opt_level": 0}
 
 
-def init(arch=None, **kwargs):
+def init(arch=None, memoize_sources: bool = True, **kwargs):
     """``ti.init(arch, **kwargs)`` with :data:`TAICHI_INIT_OPTIONS` where ``kwargs`` does not set them (the
     application's choice, called once per process as ``ti.init`` is; the package never calls it at import).
-    ``arch=None`` is Taichi's own default (``TI_ARCH`` where set, else the CPU)."""
+    ``arch=None`` is Taichi's own default (``TI_ARCH`` where set, else the CPU).  ``memoize_sources``: first
+    :func:`memoize_kernel_sources` (the same kernels, Taichi's frontend faster)."""
     import taichi as ti
 
+    if memoize_sources:
+        memoize_kernel_sources()
     return ti.init(arch=arch, **{**TAICHI_INIT_OPTIONS, **kwargs})
+
+
+def memoize_kernel_sources() -> bool:
+    """Keep the source of each function Taichi 1.7's frontend reads, instead of reading it again each time; returns
+    whether this Taichi has the two functions (else it is left as it is).  Once per process; :func:`init` calls it.
+
+    Taichi's frontend runs for every new kernel instance, even when the compiled kernel then comes from the offline
+    cache, and each time it parses a kernel or inlines a ``ti.func`` it asks ``inspect`` for the function's source
+    lines and file (``kernel_impl._get_tree_and_ctx``), which tokenizes the file's function again: 1,276 times in the
+    grooming tool's first frame.  Kept per function object (``getsourcelines`` and ``getsourcefile`` of
+    ``taichi.lang.kernel_impl``); the AST is still parsed anew each time (Taichi annotates it).  The same source,
+    so the same kernels and offline-cache keys.  A function redefined (a new object) is read anew; a file edited
+    under a running process keeps the source its functions were first read with, as Python's own ``linecache``
+    would until checked.  Measured (BENCHMARKS.md, "Taichi's frontend: the sources read once"): the grooming
+    tool's first frame with a warm cache (3,000 strands, with ``cli.common.lighter_kernel_positions`` as the app
+    runs) NN."""
+    global _SOURCES_MEMOIZED
+    if _SOURCES_MEMOIZED is not None:
+        return _SOURCES_MEMOIZED
+    try:
+        from taichi.lang import kernel_impl
+    except ImportError:  # (another Taichi: left as it is)
+        _SOURCES_MEMOIZED = False
+        return False
+    lines_of, file_of = getattr(kernel_impl, "getsourcelines", None), getattr(kernel_impl, "getsourcefile", None)
+    if not callable(lines_of) or not callable(file_of):
+        _SOURCES_MEMOIZED = False
+        return False
+    sources, files = {}, {}
+
+    def getsourcelines(obj):
+        try:
+            found = sources.get(obj)
+        except TypeError:  # (not hashable: not kept)
+            return lines_of(obj)
+        if found is None:
+            found = sources[obj] = lines_of(obj)
+        return list(found[0]), found[1]
+
+    def getsourcefile(obj):
+        try:
+            if obj not in files:
+                files[obj] = file_of(obj)
+        except TypeError:
+            return file_of(obj)
+        return files[obj]
+
+    getsourcelines.__wrapped__, getsourcefile.__wrapped__ = lines_of, file_of
+    kernel_impl.getsourcelines, kernel_impl.getsourcefile = getsourcelines, getsourcefile
+    _SOURCES_MEMOIZED = True
+    return True
+
+
+_SOURCES_MEMOIZED = None

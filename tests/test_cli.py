@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -252,6 +253,68 @@ def test_lighter_kernel_positions_change_no_bit_and_keep_file_and_line_in_compil
     proc = subprocess.run([sys.executable, str(bad)], capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode != 0
     assert f'File "{bad}", line 10, in k' in proc.stderr and "undefined_name + 1.0" in proc.stderr, proc.stderr[-2000:]
+
+
+def _module_from(path, text: str, name: str):
+    import importlib.util
+
+    path.write_text(text)
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+KERNEL_SOURCE = """import taichi as ti
+
+out = ti.field(float, 3)
+
+
+@ti.func
+def twice(v):
+    return 2.0 * v{extra}
+
+
+@ti.kernel
+def fill():
+    for i in out:
+        out[i] = twice(twice(float(i)))
+"""
+
+
+def test_kernel_sources_are_read_once_and_are_the_sources_inspect_reads(tmp_path):
+    """taichi_hair.init memoizes Taichi's source reading (``memoize_kernel_sources``): what its frontend gets is what
+    ``inspect`` gives (lines and first line number, a fresh list each call), a redefined function is read anew, the
+    kernel built from it computes 4 i (twice, inlined twice), and a compile error still names its file and line."""
+    import inspect
+
+    import taichi as ti
+    from taichi.lang import kernel_impl
+
+    import taichi_hair
+
+    assert taichi_hair.memoize_kernel_sources()  # (applied by the session's taichi_hair.init already)
+    assert hasattr(kernel_impl.getsourcelines, "__wrapped__")
+    mod = _module_from(tmp_path / "kernels_a.py", KERNEL_SOURCE.format(extra=""), "kernels_a")
+    f = mod.twice.func.func
+    first = kernel_impl.getsourcelines(f)
+    assert first == inspect.getsourcelines(f) and first[1] == 6  # (the decorator's line)
+    first[0].append("mutated")
+    assert kernel_impl.getsourcelines(f) == inspect.getsourcelines(f)  # (a copy each time)
+    assert kernel_impl.getsourcefile(f) == inspect.getsourcefile(f) == str(tmp_path / "kernels_a.py")
+    mod.fill()
+    assert np.array_equal(mod.out.to_numpy(), [0.0, 4.0, 8.0])
+    # The same name redefined in another file, with another body: read anew.
+    mod_b = _module_from(tmp_path / "kernels_b.py", KERNEL_SOURCE.format(extra=" + 1.0"), "kernels_b")
+    g = mod_b.twice.func.func
+    assert kernel_impl.getsourcelines(g) == inspect.getsourcelines(g) != first
+    mod_b.fill()
+    assert np.array_equal(mod_b.out.to_numpy(), [3.0, 7.0, 11.0])  # 2 (2 i + 1) + 1
+    bad = _module_from(tmp_path / "kernels_c.py", KERNEL_SOURCE.format(extra=" + undefined_name"), "kernels_c")
+    with pytest.raises(Exception) as err:
+        bad.fill()
+    assert "kernels_c.py" in str(err.value) and "line 8" in str(err.value), str(err.value)
+    assert ti.lang.impl.current_cfg().opt_level == 0
 
 
 def test_file_outputs_with_the_same_stem_keep_their_own_sidecars(tmp_path):

@@ -23,18 +23,20 @@ import time
 def grooming_session(strands: int, schedule: str = "auto", **init):
     """Taichi started (``taichi_hair.init`` on the CPU, f32, ``init`` passed on), NumPy's huge-page advice off as in the
     app, and the grooming benchmark's groom (wavy strands x 14 vertices on ``assets/head.obj``) in a built session of
-    10 % sag-free guides with hair-hair contacts and 10 iterations per step.  Returns ``(ti, groom, session)``.  The
+    10 % sag-free guides with hair-hair contacts and 10 iterations per step (Taichi's frontend lightened as the app's,
+    ``cli.common.lighter_kernel_positions``).  Returns ``(ti, groom, session)``.  The
     grooming probes (``groom_config_ab.py``, ``groom_edit_malloc.py``) import it and ``timed_frame`` from here."""
     import taichi as ti
 
     import taichi_hair
 
     taichi_hair.init(arch=ti.x64, default_fp=ti.f32, log_level=ti.WARN, **init)
-    from taichi_hair.cli.common import no_numpy_huge_pages
+    from taichi_hair.cli.common import lighter_kernel_positions, no_numpy_huge_pages
     from taichi_hair.groom.generators import GeneratorConfig, generate_groom, load_head
     from taichi_hair.groom.session import GroomingConfig, GroomingSession
 
     no_numpy_huge_pages()
+    lighter_kernel_positions()
     groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=strands, vertices_per_strand=14,
                                                         length=0.25, seed=0))
     session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=True, autosave_every=0,
