@@ -68,6 +68,7 @@ __all__ = [
     "init",
     "memoize_kernel_sources",
     "TAICHI_INIT_OPTIONS",
+    "OFFLINE_CACHE_BYTES",
 ]
 __version__ = "0.1.0"
 
@@ -84,16 +85,31 @@ __version__ = "0.1.0"
 TAICHI_INIT_OPTIONS = {"opt_level": 0}
 
 
+#: Taichi's offline kernel cache may hold this many bytes before it drops its least recently used quarter
+#: (``offline_cache_max_size_of_files``; Taichi's own default is 100 MiB).  Taichi compiles a kernel for the sizes of
+#: the fields it is given, so every groom size opened is a cold start and adds its own kernels: a grooming session's
+#: 129 kernels took 5.6 MB (2,000 strands, measured 2026-12-07), and ``~/.cache/taichi`` on the 2-core VM stood at 96 %
+#: of the 100 MiB after the sessions' runs of many sizes, evicting kernels a later run then compiled again.
+#: :func:`init` sets 1 GiB unless the call or ``TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES`` sets another.
+OFFLINE_CACHE_BYTES = 1 << 30
+
+
 def init(arch=None, memoize_sources: bool = True, **kwargs):
     """``ti.init(arch, **kwargs)`` with :data:`TAICHI_INIT_OPTIONS` where ``kwargs`` does not set them (the
     application's choice, called once per process as ``ti.init`` is; the package never calls it at import).
     ``arch=None`` is Taichi's own default (``TI_ARCH`` where set, else the CPU).  ``memoize_sources``: first
-    :func:`memoize_kernel_sources` (the same kernels, Taichi's frontend faster)."""
+    :func:`memoize_kernel_sources` (the same kernels, Taichi's frontend faster).  The offline kernel cache may grow
+    to :data:`OFFLINE_CACHE_BYTES` unless ``kwargs`` or the environment says otherwise."""
+    import os
+
     import taichi as ti
 
     if memoize_sources:
         memoize_kernel_sources()
-    return ti.init(arch=arch, **{**TAICHI_INIT_OPTIONS, **kwargs})
+    options = dict(TAICHI_INIT_OPTIONS)
+    if not os.environ.get("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES"):
+        options["offline_cache_max_size_of_files"] = OFFLINE_CACHE_BYTES
+    return ti.init(arch=arch, **{**options, **kwargs})
 
 
 def memoize_kernel_sources() -> bool:

@@ -227,6 +227,18 @@ def test_the_tests_run_under_taichi_hair_init_options():
     cfg = ti.lang.impl.current_cfg()
     assert th.TAICHI_INIT_OPTIONS == {"opt_level": 0}
     assert cfg.opt_level == 0 and cfg.default_fp == ti.f32
+    # The kernel cache's size: the environment's where set (conftest: 2 GiB - 1), else 1 GiB, else the call's.
+    assert cfg.offline_cache_max_size_of_files == int(os.environ["TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES"]) == 2**31 - 1
+    code = ("import taichi as ti, taichi_hair as th\n"
+            "th.init(arch=ti.cpu, log_level=ti.ERROR)\n"
+            "a = ti.lang.impl.current_cfg().offline_cache_max_size_of_files\n"
+            "th.init(arch=ti.cpu, log_level=ti.ERROR, offline_cache_max_size_of_files=5 << 20)\n"
+            "print(a, ti.lang.impl.current_cfg().offline_cache_max_size_of_files)\n")
+    env = {k: v for k, v in os.environ.items() if k != "TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES"}
+    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split()[-2:] == [str(th.OFFLINE_CACHE_BYTES), str(5 << 20)] and th.OFFLINE_CACHE_BYTES == 1 << 30
 
 
 def test_lighter_kernel_positions_change_no_bit_and_keep_file_and_line_in_compile_errors(tmp_path):
