@@ -89,7 +89,7 @@ TAICHI_INIT_OPTIONS = {"opt_level": 0}
 #: (``offline_cache_max_size_of_files``; Taichi's own default is 100 MiB).  Taichi compiles a kernel for the sizes of
 #: the fields it is given, so every groom size opened is a cold start and adds its own kernels: a grooming session's
 #: 129 kernels took 5.6 MB (2,000 strands, measured 2026-12-07), and ``~/.cache/taichi`` on the 2-core VM stood at 96 %
-#: of the 100 MiB after the sessions' runs of many sizes, evicting kernels a later run then compiled again.
+#: of the 100 MiB after the sessions' runs of many sizes (past it, Taichi drops the least recently used quarter).
 #: :func:`init` sets 1 GiB unless the call or ``TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES`` sets another.
 OFFLINE_CACHE_BYTES = 1 << 30
 
@@ -113,54 +113,41 @@ def init(arch=None, memoize_sources: bool = True, **kwargs):
 
 
 def memoize_kernel_sources() -> bool:
-    """Keep the source of each function Taichi 1.7's frontend reads, instead of reading it again each time; returns
-    whether this Taichi has the two functions (else it is left as it is).  Once per process; :func:`init` calls it.
+    """Keep the source lines of each function Taichi 1.7's frontend reads, instead of reading them again each time;
+    returns whether this Taichi has the function (else it is left as it is).  Once per process (a second call finds
+    the memo in place); :func:`init` calls it.
 
     Taichi's frontend runs for every new kernel instance, even when the compiled kernel then comes from the offline
     cache, and each time it parses a kernel or inlines a ``ti.func`` it asks ``inspect`` for the function's source
-    lines and file (``kernel_impl._get_tree_and_ctx``), which tokenizes the file's function again: 1,276 times in the
-    grooming tool's first frame.  Kept per function object (``getsourcelines`` and ``getsourcefile`` of
-    ``taichi.lang.kernel_impl``); the AST is still parsed anew each time (Taichi annotates it).  The same source,
-    so the same kernels and offline-cache keys.  A function redefined (a new object) is read anew; a file edited
-    under a running process keeps the source its functions were first read with, as Python's own ``linecache``
-    would until checked.  Measured (BENCHMARKS.md, "Taichi's frontend: the sources read once"): the grooming
-    session's first frame with a warm cache, 3,000 strands, 7.1-7.2 s -> 5.9-6.5 s (with
-    ``cli.common.lighter_kernel_positions``, as the app runs) and 10.7 -> 9.0 s (without)."""
-    global _SOURCES_MEMOIZED
-    if _SOURCES_MEMOIZED is not None:
-        return _SOURCES_MEMOIZED
+    lines (``kernel_impl._get_tree_and_ctx``), which tokenizes the file's function again: 1,276 times in the
+    grooming tool's first frame.  Kept per function object (``taichi.lang.kernel_impl.getsourcelines``, a fresh list
+    each call); the AST is still parsed anew each time (Taichi annotates it).  The same source, so the same kernels
+    and offline-cache keys.  A function redefined (a new object) is read anew; a file edited under a running process
+    keeps the source its functions were first read with.  The other frontend saving, Taichi's position messages
+    shortened, changes error messages and is the application's choice (``cli.common.lighter_kernel_positions``).
+    Measured (BENCHMARKS.md, "Taichi's frontend: the sources read once"): the grooming session's first frame with a
+    warm cache, 3,000 strands, 7.1-7.2 s -> 5.9-6.5 s (with the shortened messages, as the app runs) and
+    10.7 -> 9.0 s (without)."""
     try:
         from taichi.lang import kernel_impl
     except ImportError:  # (another Taichi: left as it is)
-        _SOURCES_MEMOIZED = False
         return False
-    lines_of, file_of = getattr(kernel_impl, "getsourcelines", None), getattr(kernel_impl, "getsourcefile", None)
-    if not callable(lines_of) or not callable(file_of):
-        _SOURCES_MEMOIZED = False
+    read = getattr(kernel_impl, "getsourcelines", None)
+    if not callable(read):
         return False
-    sources, files = {}, {}
+    if hasattr(read, "__wrapped__"):  # (in place already)
+        return True
+    sources = {}
 
     def getsourcelines(obj):
         try:
             found = sources.get(obj)
         except TypeError:  # (not hashable: not kept)
-            return lines_of(obj)
+            return read(obj)
         if found is None:
-            found = sources[obj] = lines_of(obj)
+            found = sources[obj] = read(obj)
         return list(found[0]), found[1]
 
-    def getsourcefile(obj):
-        try:
-            if obj not in files:
-                files[obj] = file_of(obj)
-        except TypeError:
-            return file_of(obj)
-        return files[obj]
-
-    getsourcelines.__wrapped__, getsourcefile.__wrapped__ = lines_of, file_of
-    kernel_impl.getsourcelines, kernel_impl.getsourcefile = getsourcelines, getsourcefile
-    _SOURCES_MEMOIZED = True
+    getsourcelines.__wrapped__ = read
+    kernel_impl.getsourcelines = getsourcelines
     return True
-
-
-_SOURCES_MEMOIZED = None
