@@ -17,8 +17,6 @@ often they change: ``*Info`` groups belong to the Model and are written once at
 the solver.  Every field is allocated once, never inside ``step()``.
 """
 
-from __future__ import annotations
-
 import taichi as ti
 
 vec3 = ti.math.vec3
@@ -497,3 +495,87 @@ class CCDFields:
         self.max_box_side = ti.field(float, ())
         self.max_edge_length = ti.field(float, ())
         self.capped_queries = ti.field(ti.i32, ())
+
+
+# --------------------------------------------------------------------------- host transfers, one kernel per group
+# Taichi's ``field.from_numpy`` / ``to_numpy`` / ``copy_from`` / ``fill`` compile one kernel instance per field, and a
+# new Model's fields are new instances: each costs Taichi's frontend and a load from the kernel cache (30-60 ms
+# warm, more cold; measured 2026-12-07, a 4-strand Model with its State and solver took 50 instances, 38 of them
+# such copies).  These do the same for a whole group of fields in one kernel (issue 15, item 5).
+
+
+def upload(pairs) -> None:
+    """``field.from_numpy(array)`` for every ``(field, array)`` of ``pairs``: fields of one dimension, scalar, vector or
+    matrix elements; each array is cast to its field's type on the host (NumPy's rounding, as ``from_numpy``'s
+    kernel does) and its shape checked.  One kernel launch per element type."""
+    import numpy as np
+
+    groups: dict = {}
+    for field, value in pairs:
+        shape = tuple(field.shape) + _element_shape(field)
+        a = np.ascontiguousarray(value, dtype=ti.lang.util.to_numpy_type(field.dtype))
+        if a.shape != shape:
+            raise ValueError(f"upload: an array of shape {a.shape} for a field of shape {shape}")
+        groups.setdefault(a.dtype, []).append((field, a))
+    for items in groups.values():
+        layout, offset = [], 0
+        for field, a in items:
+            layout.append((offset,) + _element_shape(field))
+            offset += a.size
+        _upload_kernel(tuple(f for f, _ in items), tuple(layout), np.concatenate([a.ravel() for _, a in items]))
+
+
+def _element_shape(field) -> tuple:
+    if len(field.shape) != 1:
+        raise ValueError(f"upload: fields of one dimension only, not of shape {tuple(field.shape)}")
+    if isinstance(field, ti.lang.matrix.MatrixField):
+        return (field.n,) if field.ndim == 1 else (field.n, field.m)
+    return ()
+
+
+@ti.kernel
+def _upload_kernel(fields: ti.template(), layout: ti.template(), data: ti.types.ndarray()):
+    for k in ti.static(range(len(fields))):
+        for i in range(fields[k].shape[0]):
+            if ti.static(len(layout[k]) == 1):
+                fields[k][i] = data[layout[k][0] + i]
+            elif ti.static(len(layout[k]) == 2):
+                for c in ti.static(range(layout[k][1])):
+                    fields[k][i][c] = data[layout[k][0] + i * layout[k][1] + c]
+            else:
+                for r, c in ti.static(ti.ndrange(layout[k][1], layout[k][2])):
+                    fields[k][i][r, c] = data[layout[k][0] + (i * layout[k][1] + r) * layout[k][2] + c]
+
+
+def download(fields) -> list:
+    """``[field.to_numpy() for field in fields]`` (fields of one dimension) in one kernel launch per element type."""
+    import numpy as np
+
+    groups: dict = {}
+    for j, field in enumerate(fields):
+        groups.setdefault(ti.lang.util.to_numpy_type(field.dtype), []).append(j)
+    out = [None] * len(fields)
+    for dtype, idx in groups.items():
+        shapes = [tuple(fields[j].shape) + _element_shape(fields[j]) for j in idx]
+        sizes = [int(np.prod(s)) for s in shapes]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        data = np.empty(int(offsets[-1]), dtype)
+        layout = tuple((int(offsets[k]),) + _element_shape(fields[j]) for k, j in enumerate(idx))
+        _download_kernel(tuple(fields[j] for j in idx), layout, data)
+        for k, j in enumerate(idx):
+            out[j] = data[offsets[k]:offsets[k + 1]].reshape(shapes[k])
+    return out
+
+
+@ti.kernel
+def _download_kernel(fields: ti.template(), layout: ti.template(), data: ti.types.ndarray()):
+    for k in ti.static(range(len(fields))):
+        for i in range(fields[k].shape[0]):
+            if ti.static(len(layout[k]) == 1):
+                data[layout[k][0] + i] = fields[k][i]
+            elif ti.static(len(layout[k]) == 2):
+                for c in ti.static(range(layout[k][1])):
+                    data[layout[k][0] + i * layout[k][1] + c] = fields[k][i][c]
+            else:
+                for r, c in ti.static(ti.ndrange(layout[k][1], layout[k][2])):
+                    data[layout[k][0] + (i * layout[k][1] + r) * layout[k][2] + c] = fields[k][i][r, c]

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from .fields import EdgeInfo, PairInfo, StrandInfo, VertexInfo
+from .fields import EdgeInfo, PairInfo, StrandInfo, VertexInfo, upload
 from .frames import update_reference_frames
 from .state import Control, State
 
@@ -48,10 +48,9 @@ class Model:
         for role in (self.vertex, self.edge, self.pair, self.strand):
             for name, field in vars(role).items():
                 setattr(self, name, field)
-        self._upload(host)
         #: Identity body transforms, used to build the rest state.
         self._rest_rotation = ti.Matrix.field(3, 3, float, body_count)
-        self._rest_rotation.from_numpy(np.tile(np.eye(3), (body_count, 1, 1)).astype(_np_float()))
+        self._upload(host, [(self._rest_rotation, np.tile(np.eye(3), (body_count, 1, 1)).astype(_np_float()))])
 
     # ------------------------------------------------------------------ in-place updates
     def update(self, host: dict, materials: list | None = None) -> None:
@@ -75,21 +74,20 @@ class Model:
         if materials is not None:
             self.materials = materials
 
-    def _upload(self, host: dict) -> None:
-        """Copy every host array that has a field of the same name into that field."""
-        for name, value in host.items():
-            field = getattr(self, name, None)
-            if isinstance(field, ti.Field):
-                field.from_numpy(np.ascontiguousarray(value, dtype=_np_dtype(field)))
+    def _upload(self, host: dict, more=()) -> None:
+        """Copy every host array that has a field of the same name into that field, and the (field, array) pairs
+        ``more`` (one kernel per element type: ``fields.upload``)."""
+        upload([(field, np.ascontiguousarray(value, dtype=_np_dtype(field))) for name, value in host.items()
+                if isinstance(field := getattr(self, name, None), ti.Field)] + list(more))
 
     def reset_state(self, state: State) -> None:
         """Put ``state`` (allocated by :meth:`state`) back at rest, in place (no new fields)."""
-        state.vertex_position.copy_from(self.vertex_rest_position)
-        state.vertex_velocity.fill(0.0)
-        state.edge_twist.copy_from(self.edge_rest_twist)
-        state.edge_angular_velocity.fill(0.0)
-        state.edge_tangent.from_numpy(self.host["edge_rest_tangent"].astype(_np_float()))
-        state.edge_reference_director.copy_from(self.edge_rest_director)
+        h, f, n = self.host, _np_float(), self.vertex_count
+        # From the host arrays the Model's fields were cast from (the same values), in one kernel (fields.upload).
+        upload([(state.vertex_position, h["vertex_rest_position"].astype(f)), (state.vertex_velocity, np.zeros((n, 3), f)),
+                (state.edge_twist, h["edge_rest_twist"].astype(f)), (state.edge_angular_velocity, np.zeros(n, f)),
+                (state.edge_tangent, h["edge_rest_tangent"].astype(f)),
+                (state.edge_reference_director, h["edge_rest_director"].astype(f))])
         update_reference_frames(True, self.vertex, self.edge, self.pair, self.strand, self._rest_rotation, state.vertex_position,
                                 state.edge_twist, state)
 

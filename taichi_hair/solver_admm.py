@@ -60,7 +60,7 @@ from . import admm
 from .anderson import ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_auto_window, anderson_begin, anderson_mix
 from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
-from .fields import SolverBuffers
+from .fields import SolverBuffers, upload
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
 from .lanes import (CONTACT_ITERATION, ITERATIONS, LaneLayout, admm_iterations_lanes, auto_schedule, lanes_frames, lanes_gather,
@@ -231,9 +231,8 @@ class SolverADMM(SolverBase):
             raise ValueError(f"SolverADMMConfig.w0 = {cfg.w0:g} makes the elasticity weight W_y of pair {k} "
                              f"{weight[k]:.3g}, beyond what {np.dtype(f).name} holds with headroom ({top:.3g}); "
                              f"use w0 of order 1 (the default 1, the paper's 25)")
-        self.buf.pair_bend_stiffness.from_numpy(bend.astype(f))
-        self.buf.pair_admm_weight.from_numpy(weight.astype(f))
-        self.buf.edge_pair_stretch_stiffness.from_numpy(ks.astype(f))
+        upload([(self.buf.pair_bend_stiffness, bend.astype(f)), (self.buf.pair_admm_weight, weight.astype(f)),
+                (self.buf.edge_pair_stretch_stiffness, ks.astype(f))])
         self.host_pair_voronoi_bend = vstar
 
     def _anderson_on(self) -> bool:
@@ -514,7 +513,7 @@ class SolverADMM(SolverBase):
             raise ValueError(f"set_attachments: vertices in [0, {n}), one finite target each and weights >= 0 expected")
         weight, target = np.zeros(n, _np_float()), np.zeros((n, 3), _np_float())
         weight[v], target[v] = k, t
-        self.buf.vertex_attach_weight.from_numpy(weight), self.buf.vertex_attach_target.from_numpy(target)
+        upload([(self.buf.vertex_attach_weight, weight), (self.buf.vertex_attach_target, target)])
 
     def checkpoint(self) -> dict:
         """What the solver carries from one step to the next, as NumPy arrays.

@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import taichi as ti
 
+from ..fields import upload
+
 vec3 = ti.math.vec3
 
 PLANE, SPHERE, CAPSULE, MESH = 0, 1, 2, 3
@@ -343,16 +345,10 @@ class ColliderSet:
                 grid[k] = (off, c.sdf.shape[0])
                 flat.append(c.sdf.reshape(-1))
                 off += c.sdf.size
-        self.collider_kind.from_numpy(kind)
-        self.collider_body.from_numpy(body)
-        self.collider_friction.from_numpy(fr.astype(f))
-        self.collider_a.from_numpy(a.astype(f))
-        self.collider_b.from_numpy(b.astype(f))
-        self.collider_radius.from_numpy(rad.astype(f))
-        self.collider_grid.from_numpy(grid)
-        self.collider_strands.from_numpy(strands)
-        if flat:
-            self.sdf_value.from_numpy(np.concatenate(flat).astype(f))
+        upload([(self.collider_kind, kind), (self.collider_body, body), (self.collider_friction, fr.astype(f)),
+                (self.collider_a, a.astype(f)), (self.collider_b, b.astype(f)), (self.collider_radius, rad.astype(f)),
+                (self.collider_grid, grid), (self.collider_strands, strands)]
+               + ([(self.sdf_value, np.concatenate(flat).astype(f))] if flat else []))
 
     def any_acting(self) -> bool:
         """Does any collider act on a strand (``collider_strands`` not empty)?  The grooming comb is idle,
@@ -365,14 +361,10 @@ class ColliderSet:
     def begin_step(self, control) -> None:
         """Take the end-of-step body transforms from ``control``; the begin-of-step ones are those of the
         previous step's end (on the first step: the current ones, i.e. no body motion in that step)."""
-        if not self.has_begin:
-            self.body_rotation_end.copy_from(control.body_rotation)
-            self.body_translation_end.copy_from(control.body_translation)
-            self.has_begin = True
-        self.body_rotation_begin.copy_from(self.body_rotation_end)
-        self.body_translation_begin.copy_from(self.body_translation_end)
-        self.body_rotation_end.copy_from(control.body_rotation)
-        self.body_translation_end.copy_from(control.body_translation)
+        # One kernel, not six field copies: each copy_from is a kernel instance of its own, compiled (or loaded from
+        # the cache) in the first step (issue 15, item 5).
+        _advance_body_transforms(self, control.body_rotation, control.body_translation, int(not self.has_begin))
+        self.has_begin = True
 
     def distance_numpy(self, points: np.ndarray, control=None, k: int = 0) -> np.ndarray:
         """Signed distance of world points to collider k at the transforms of ``control`` (host, for tests) [m]."""
@@ -474,6 +466,19 @@ def body_transform(rot: ti.template(), tr: ti.template(), body: ti.i32):
         R = rot[body]
         T = tr[body]
     return R, T
+
+
+@ti.kernel
+def _advance_body_transforms(cs: ti.template(), rotation: ti.template(), translation: ti.template(), first: ti.i32):
+    """begin <- end, end <- (rotation, translation); on the first step begin <- the new transforms too."""
+    for b in rotation:
+        if first:
+            cs.body_rotation_end[b] = rotation[b]
+            cs.body_translation_end[b] = translation[b]
+        cs.body_rotation_begin[b] = cs.body_rotation_end[b]
+        cs.body_translation_begin[b] = cs.body_translation_end[b]
+        cs.body_rotation_end[b] = rotation[b]
+        cs.body_translation_end[b] = translation[b]
 
 
 @ti.kernel

@@ -91,10 +91,10 @@ def correct(pl, x, x0, sweeps: int) -> None:
         since += 1
         if rho > 0:
             if since < _CHEBYSHEV_DELAY:
-                chebyshev_step(m.vertex, pl.con, pl._cheb[0], pl._cheb[1], 1.0, True, small)
+                chebyshev_step(m.vertex, pl.con, pl._cheb[0], pl._cheb[1], 1.0, 1, small)
             else:
                 omega = 2.0 / (2.0 - rho * rho) if since == _CHEBYSHEV_DELAY else 4.0 / (4.0 - rho * rho * omega)
-                chebyshev_step(m.vertex, pl.con, pl._cheb[0], pl._cheb[1], omega, False, small)
+                chebyshev_step(m.vertex, pl.con, pl._cheb[0], pl._cheb[1], omega, 0, small)
         if done == target:
             if hold:
                 # Edge passes alone: each Gauss-Seidel sweep leaves the colour projected first off by a
@@ -146,15 +146,16 @@ def _restart(pl, x, x0, split, frictionless) -> None:
 
 @ti.kernel
 def chebyshev_step(vertex: ti.template(), con: ti.template(), prev: ti.template(), cur: ti.template(), omega: float,
-                   first: ti.template(), serial: ti.template()):
+                   first: ti.i32, serial: ti.template()):
     """Chebyshev semi-iterative acceleration of the correction's sweeps (Wang 2015, for position-based
     projections): z_{k+1} = omega (z~_{k+1} - z_{k-1}) + z_{k-1}, with z~ the sweep's result; ``prev`` and
-    ``cur`` hold z_{k-1} and z_k and move on by one.  ``first``: only record z (omega unused); ``serial``: on
-    the launching thread."""
+    ``cur`` hold z_{k-1} and z_k and move on by one.  ``first`` (1 or 0): only record z (omega unused); a launch
+    argument, not a compile-time one, so that both uses share one kernel instance; ``serial``: on the launching
+    thread."""
     ti.loop_config(serialize=serial)
     for i in range(con.vertex_z.shape[0]):
         zt = con.vertex_z[i]
-        if ti.static(first):
+        if first:
             prev[i] = zt
             cur[i] = zt
         elif vertex.vertex_is_fixed[i] == 0:

@@ -9,6 +9,7 @@ import numpy as np
 import taichi as ti
 
 from ..config import CorrectionContactOrder, MassSplitting, WeightTime
+from ..fields import upload
 from ..solver_base import on_gpu
 
 from .narrow import (BEND_ALL, BEND_BODY, BEND_NONE, build_adjacency, count_contacts, write_contacts)
@@ -174,14 +175,13 @@ class ContactPipeline:
         counts = np.bincount(strand, weights=(le > 0).astype(float), minlength=model.strand_count)
         sums = np.bincount(strand, weights=le, minlength=model.strand_count)
         typical = (sums / np.maximum(counts, 1))[strand]
-        self.vertex_radius.from_numpy(radius.astype(f))
-        self.vertex_weight_base.from_numpy(np.maximum(h["vertex_mass"], 1e-30).astype(f))
-        self.vertex_typical_length.from_numpy(typical.astype(f))
-        self.vertex_dt_bend.from_numpy((2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f))
         from .slabs import slabs_are_runs, vertex_slabs
 
         slab = vertex_slabs(h["vertex_rest_position"][h["strand_vertex_start"]], strand)
-        self.vertex_slab.from_numpy(slab)
+        upload([(self.vertex_radius, radius.astype(f)), (self.vertex_weight_base, np.maximum(h["vertex_mass"], 1e-30).astype(f)),
+                (self.vertex_typical_length, typical.astype(f)),
+                (self.vertex_dt_bend, (2.0 * typical**2 / radius * np.sqrt(density / e_bend)).astype(f)),
+                (self.vertex_slab, slab)])
         #: Whether each slab's vertices are one run of vertex indices (the model's strands ordered along the slabs'
         #: axis, either way, as the grooming tool's guides): only then do the slab sweeps run (``contact.slabs``).
         self.slabs_contiguous = slabs_are_runs(slab)
@@ -552,7 +552,7 @@ class ContactPipeline:
         """
         import numpy as np
 
-        from .projection import OVERLAPS, contact_statistics
+        from .projection import OVERLAPS, contact_penetrations, contact_statistics
 
         con = self.con
         overlaps = self.config.hair_hair and self.config.keep_rest_overlaps
@@ -562,8 +562,10 @@ class ContactPipeline:
         p99 = 0.0
         kept = 0
         if self.config.hair_hair and nc > 0:
-            pen = con.contact_penetration.to_numpy()[:nc]
-            hair = con.contact_collider.to_numpy()[:nc] < 0
+            nc_read = min(nc, con.capacity)
+            pen, hair = np.zeros(nc_read, o.dtype), np.zeros(nc_read, np.int8)  # (o: the default float)
+            contact_penetrations(con, nc_read, pen, hair)
+            hair = hair.astype(bool)
             if hair.any():
                 p99 = float(np.percentile(pen[hair], 99))
                 if self.config.keep_rest_overlaps:

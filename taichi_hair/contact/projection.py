@@ -408,6 +408,15 @@ OVERLAPS = 2
 
 
 @ti.kernel
+def contact_penetrations(con: ti.template(), n: ti.i32, penetration: ti.types.ndarray(), hair: ti.types.ndarray()):
+    """The first n contacts' penetrations [m] and whether each is hair-hair (1) or a body's (0), to the host in one
+    kernel (two ``to_numpy`` calls were two kernel instances and copied the whole capacity)."""
+    for c in range(n):
+        penetration[c] = con.contact_penetration[c]
+        hair[c] = ti.cast(con.contact_collider[c] < 0, ti.i8)
+
+
+@ti.kernel
 def contact_statistics(x: ti.template(), radius: ti.template(), cs: ti.template(), con: ti.template(),
                        out: ti.template(), with_status: ti.template()):
     """Counts of the last projection and the penetrations of every contact at the current x.

@@ -29,6 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..fields import download, upload
 from .config import COMB_BODY
 
 #: The hair-hair pairs of a grooming session are kept between frames with a Verlet skin of this many contact
@@ -353,11 +354,11 @@ class GuideSimulation:
         # The springs' weights and the targets' clearance, per drag vertex: fixed until the next call (after every
         # Model build or update, and at every drag and release), so a frame reads nothing back.
         con, rows = self.solver.contacts, self.drag_rows
-        self._drag_weight = (DRAG_WEIGHT * con.vertex_weight_base.to_numpy()[rows].astype(np.float64)
-                             / con.vertex_dt_bend.to_numpy()[rows] ** 2)
-        self._drag_clearance = con.vertex_radius.to_numpy()[rows].astype(np.float64)
-        self.model.vertex_is_fixed.from_numpy(fixed.astype(np.int32))
-        self.model.vertex_body_position.from_numpy(body.astype(self.np_float))
+        base, dt_bend, radius = download((con.vertex_weight_base, con.vertex_dt_bend, con.vertex_radius))
+        self._drag_weight = DRAG_WEIGHT * base[rows].astype(np.float64) / dt_bend[rows] ** 2
+        self._drag_clearance = radius[rows].astype(np.float64)
+        upload([(self.model.vertex_is_fixed, fixed.astype(np.int32)),
+                (self.model.vertex_body_position, body.astype(self.np_float))])
         self.drag_springs(drag_position)
 
     def shape_springs(self) -> tuple:
