@@ -60,7 +60,7 @@ from . import admm
 from .anderson import ANDERSON_MIN_ITERATIONS, AndersonBuffers, anderson_auto_window, anderson_begin, anderson_mix
 from .config import DualFrame, Integrator, Mode, Schedule, SolverADMMConfig, StrainMeasure, Tridiagonal, Twist
 from .elasticity import FRAME_NONE, FRAME_PAIR, FRAME_ROOT, prime_duals, solve_local_elasticity
-from .fields import SolverBuffers, upload
+from .fields import SolverBuffers, download, upload
 from .frames import update_material_frames, update_reference_frames, update_twist_free_frames
 from .model import Model, _np_float
 from .lanes import (CONTACT_ITERATION, ITERATIONS, LaneLayout, admm_iterations_lanes, auto_schedule, lanes_frames, lanes_gather,
@@ -526,12 +526,13 @@ class SolverADMM(SolverBase):
         step, so they hold nothing across steps.
         """
         b = self.buf
-        snap = {key: getattr(b, key).to_numpy() for key in SolverBuffers.names(b.warm_start)}
+        keys = SolverBuffers.names(b.warm_start)
+        snap = dict(zip(keys, download([getattr(b, key) for key in keys])))  # (one kernel: fields.download)
         snap.update({"step_count": np.int64(self.step_count), "iteration_count": np.int64(self.iteration_count),
                      "history_dt": np.float64(np.nan if self._history_dt is None else self._history_dt)})
         if self._history_dt is not None:
-            for key in SolverBuffers.names(b.history):
-                snap["history_" + key] = getattr(b, key).to_numpy()
+            keys = SolverBuffers.names(b.history)
+            snap.update(zip(["history_" + key for key in keys], download([getattr(b, key) for key in keys])))
         if self.contacts is not None:
             cs = self.contacts.colliders
             # The previous step's end transforms become the next step's begin transforms (collider velocity).
@@ -569,8 +570,7 @@ class SolverADMM(SolverBase):
             colliders = (bool(need("collider_has_begin", None)),
                          need("collider_rotation_end", cs.body_rotation_end),
                          need("collider_translation_end", cs.body_translation_end))
-        for field, a in loads:
-            field.from_numpy(a.astype(field.to_numpy().dtype))
+        upload(loads)  # (each array cast to its field's type, as from_numpy does)
         self.step_count, self.iteration_count = counts
         self._history_dt = hdt if np.isfinite(hdt) else None
         if colliders is not None:

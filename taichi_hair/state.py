@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from .fields import EdgeStateFields, VertexStateFields
+from .fields import EdgeStateFields, VertexStateFields, download, upload
 
 
 def _np_float():
@@ -42,8 +42,8 @@ class State(VertexStateFields, EdgeStateFields):
             getattr(self, name).copy_from(getattr(other, name))
 
     def to_numpy(self) -> dict:
-        """Snapshot of every state field as NumPy arrays."""
-        return {name: getattr(self, name).to_numpy() for name in self.FIELDS}
+        """Snapshot of every state field as NumPy arrays (in one kernel: ``fields.download``)."""
+        return dict(zip(self.FIELDS, download([getattr(self, name) for name in self.FIELDS])))
 
     def load(self, snapshot: dict) -> None:
         """Load a :meth:`to_numpy` snapshot; every member is checked for presence and shape first (a short
@@ -56,8 +56,7 @@ class State(VertexStateFields, EdgeStateFields):
             got = np.shape(snapshot[name])
             if got != want:
                 raise ValueError(f"State.load: {name} has the shape {got}, expected {want}")
-        for name in self.FIELDS:
-            getattr(self, name).from_numpy(snapshot[name])
+        upload([(getattr(self, name), snapshot[name]) for name in self.FIELDS])  # (cast as from_numpy casts)
 
     def positions(self) -> np.ndarray:
         """Vertex positions, shape (vertex_count, 3) [m]."""
@@ -80,7 +79,7 @@ class Control:
         self.body_count = body_count
         self.body_rotation = ti.Matrix.field(3, 3, float, body_count)
         self.body_translation = ti.Vector.field(3, float, body_count)
-        self.body_rotation.from_numpy(np.tile(np.eye(3), (body_count, 1, 1)).astype(_np_float()))
+        upload([(self.body_rotation, np.tile(np.eye(3), (body_count, 1, 1)).astype(_np_float()))])
         self.gravity = (0.0, -9.81, 0.0)
         self.air_velocity = (0.0, 0.0, 0.0)
 
