@@ -146,11 +146,14 @@ def twist_free_strand(start: ti.i32, count: ti.i32, edge: ti.template(), theta: 
 
 @ti.kernel
 def update_twist_free_frames(strand: ti.template(), edge: ti.template(), theta: ti.template(), es: ti.template(),
-                             with_theta: ti.template()):
-    """:func:`twist_free_strand` for every strand (strands in parallel)."""
+                             with_theta: ti.i32):
+    """:func:`twist_free_strand` for every strand (strands in parallel).  ``with_theta`` (1 or 0) is a launch
+    argument here, so that the solver's two uses share one kernel instance (one fewer per Model to compile)."""
     for s in strand.strand_vertex_start:
-        twist_free_strand(strand.strand_vertex_start[s], strand.strand_vertex_count[s], edge, theta, es,
-                          with_theta)
+        if with_theta:
+            twist_free_strand(strand.strand_vertex_start[s], strand.strand_vertex_count[s], edge, theta, es, True)
+        else:
+            twist_free_strand(strand.strand_vertex_start[s], strand.strand_vertex_count[s], edge, theta, es, False)
 
 
 # --------------------------------------------------------------------------- when the twist can be dropped

@@ -322,7 +322,7 @@ class SolverADMM(SolverBase):
             t0 = self._tock("correction", t0)
         if self.twist_free:
             # theta of the twist-free frames, once per step (the iterations only need the frames).
-            update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, True)
+            update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, 1)
         admm.end_step(dyn, state, state, b, h)
         self.step_count += 1
         if cfg.check_finite:
@@ -414,7 +414,7 @@ class SolverADMM(SolverBase):
             t0 = self._tock("frames", t0)
             if self.twist_free:
                 # (f, g) replaced by the twist of a naturally straight round rod: none (frames.twist_choice).
-                update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, False)
+                update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, 0)
             else:
                 # (f, g) Twist Newton step, then material frames.
                 admm.compute_pair_twist_terms(self.measure, m.vertex, m.pair, m.strand, state.edge_twist, state, b, damping_scale)
@@ -439,7 +439,7 @@ class SolverADMM(SolverBase):
         update_reference_frames(self.with_ref_twist, m.vertex, m.edge, m.pair, m.strand, control.body_rotation,
                                 state.vertex_position, state.edge_twist, state)
         if self.twist_free:
-            update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, False)
+            update_twist_free_frames(m.strand, m.edge, state.edge_twist, state, 0)
 
     def model_report(self) -> dict:
         """What the solver modelled and skipped so far, in words, by topic (README, "Model no more than a scene needs")."""
