@@ -504,47 +504,31 @@ class CCDFields:
 # such copies).  These do the same for a whole group of fields in one kernel (issue 15, item 5).
 
 
+def field_numpy_shape(field) -> tuple:
+    """The shape ``field.to_numpy()`` has: the field's shape, then (n,) for a vector or (n, m) for a matrix
+    field."""
+    n, m = getattr(field, "n", None), getattr(field, "m", None)
+    tail = () if n is None else (n,) if m == 1 else (n, m)
+    return tuple(field.shape) + tail
+
+
 def upload(pairs) -> None:
     """``field.from_numpy(array)`` for every ``(field, array)`` of ``pairs``: fields of one dimension, scalar, vector or
     matrix elements; each array is cast to its field's type on the host (NumPy's rounding, as ``from_numpy``'s
-    kernel does) and its shape checked.  One kernel launch per element type."""
+    kernel does) and its shape checked before anything is written.  One kernel launch per element type."""
     import numpy as np
 
     groups: dict = {}
     for field, value in pairs:
-        shape = tuple(field.shape) + _element_shape(field)
+        shape = _transfer_shape(field)
         a = np.ascontiguousarray(value, dtype=ti.lang.util.to_numpy_type(field.dtype))
         if a.shape != shape:
             raise ValueError(f"upload: an array of shape {a.shape} for a field of shape {shape}")
         groups.setdefault(a.dtype, []).append((field, a))
     for items in groups.values():
-        layout, offset = [], 0
-        for field, a in items:
-            layout.append((offset,) + _element_shape(field))
-            offset += a.size
-        _upload_kernel(tuple(f for f, _ in items), tuple(layout), np.concatenate([a.ravel() for _, a in items]))
-
-
-def _element_shape(field) -> tuple:
-    if len(field.shape) != 1:
-        raise ValueError(f"upload: fields of one dimension only, not of shape {tuple(field.shape)}")
-    if isinstance(field, ti.lang.matrix.MatrixField):
-        return (field.n,) if field.ndim == 1 else (field.n, field.m)
-    return ()
-
-
-@ti.kernel
-def _upload_kernel(fields: ti.template(), layout: ti.template(), data: ti.types.ndarray()):
-    for k in ti.static(range(len(fields))):
-        for i in range(fields[k].shape[0]):
-            if ti.static(len(layout[k]) == 1):
-                fields[k][i] = data[layout[k][0] + i]
-            elif ti.static(len(layout[k]) == 2):
-                for c in ti.static(range(layout[k][1])):
-                    fields[k][i][c] = data[layout[k][0] + i * layout[k][1] + c]
-            else:
-                for r, c in ti.static(ti.ndrange(layout[k][1], layout[k][2])):
-                    fields[k][i][r, c] = data[layout[k][0] + (i * layout[k][1] + r) * layout[k][2] + c]
+        offsets = np.cumsum([0] + [a.size for _, a in items[:-1]])
+        _transfer_kernel(tuple(f for f, _ in items), _layout([f for f, _ in items], offsets),
+                         np.concatenate([a.ravel() for _, a in items]), False)
 
 
 def download(fields) -> list:
@@ -556,26 +540,46 @@ def download(fields) -> list:
         groups.setdefault(ti.lang.util.to_numpy_type(field.dtype), []).append(j)
     out = [None] * len(fields)
     for dtype, idx in groups.items():
-        shapes = [tuple(fields[j].shape) + _element_shape(fields[j]) for j in idx]
-        sizes = [int(np.prod(s)) for s in shapes]
-        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        shapes = [_transfer_shape(fields[j]) for j in idx]
+        offsets = np.cumsum([0] + [int(np.prod(s)) for s in shapes])
         data = np.empty(int(offsets[-1]), dtype)
-        layout = tuple((int(offsets[k]),) + _element_shape(fields[j]) for k, j in enumerate(idx))
-        _download_kernel(tuple(fields[j] for j in idx), layout, data)
+        _transfer_kernel(tuple(fields[j] for j in idx), _layout([fields[j] for j in idx], offsets), data, True)
         for k, j in enumerate(idx):
             out[j] = data[offsets[k]:offsets[k + 1]].reshape(shapes[k])
     return out
 
 
+def _transfer_shape(field) -> tuple:
+    if len(field.shape) != 1:
+        raise ValueError(f"upload / download: fields of one dimension only, not of shape {tuple(field.shape)}")
+    return field_numpy_shape(field)
+
+
+def _layout(fields, offsets) -> tuple:
+    """Per field, its offset in the packed array and its element shape (compile-time arguments of the kernel)."""
+    return tuple((int(o),) + field_numpy_shape(f)[1:] for f, o in zip(fields, offsets))
+
+
 @ti.kernel
-def _download_kernel(fields: ti.template(), layout: ti.template(), data: ti.types.ndarray()):
+def _transfer_kernel(fields: ti.template(), layout: ti.template(), data: ti.types.ndarray(), to_host: ti.template()):
+    """fields -> data (``to_host``) or data -> fields; field k's element i at ``layout[k][0]`` + its row-major index."""
     for k in ti.static(range(len(fields))):
         for i in range(fields[k].shape[0]):
             if ti.static(len(layout[k]) == 1):
-                data[layout[k][0] + i] = fields[k][i]
+                if ti.static(to_host):
+                    data[layout[k][0] + i] = fields[k][i]
+                else:
+                    fields[k][i] = data[layout[k][0] + i]
             elif ti.static(len(layout[k]) == 2):
                 for c in ti.static(range(layout[k][1])):
-                    data[layout[k][0] + i * layout[k][1] + c] = fields[k][i][c]
+                    if ti.static(to_host):
+                        data[layout[k][0] + i * layout[k][1] + c] = fields[k][i][c]
+                    else:
+                        fields[k][i][c] = data[layout[k][0] + i * layout[k][1] + c]
             else:
                 for r, c in ti.static(ti.ndrange(layout[k][1], layout[k][2])):
-                    data[layout[k][0] + (i * layout[k][1] + r) * layout[k][2] + c] = fields[k][i][r, c]
+                    j = layout[k][0] + (i * layout[k][1] + r) * layout[k][2] + c
+                    if ti.static(to_host):
+                        data[j] = fields[k][i][r, c]
+                    else:
+                        fields[k][i][r, c] = data[j]

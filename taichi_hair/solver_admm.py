@@ -545,7 +545,7 @@ class SolverADMM(SolverBase):
         """Load what :meth:`checkpoint` returned (same Model layout).  Every member is checked for presence
         and shape before the first ``from_numpy``, so a bad snapshot raises ValueError naming the member and
         changes nothing."""
-        from .state import field_numpy_shape
+        from .fields import field_numpy_shape
 
         def need(key, field):
             if key not in snapshot:

@@ -5,19 +5,11 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
-from .fields import EdgeStateFields, VertexStateFields, download, upload
+from .fields import EdgeStateFields, VertexStateFields, download, field_numpy_shape, upload
 
 
 def _np_float():
     return np.float64 if ti.lang.impl.current_cfg().default_fp == ti.f64 else np.float32
-
-
-def field_numpy_shape(field) -> tuple:
-    """The shape ``field.to_numpy()`` has: the field's shape, then (n,) for a vector or (n, m) for a matrix
-    field."""
-    n, m = getattr(field, "n", None), getattr(field, "m", None)
-    tail = () if n is None else (n,) if m == 1 else (n, m)
-    return tuple(field.shape) + tail
 
 
 class State(VertexStateFields, EdgeStateFields):

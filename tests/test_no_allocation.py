@@ -111,10 +111,10 @@ def test_upload_and_download_move_the_same_bits_as_from_numpy_and_to_numpy():
     ours, theirs = [k() for k in kinds], [k() for k in kinds]
     values = [rng.normal(size=n), rng.integers(-9, 9, n), rng.normal(size=(n, 3)), rng.normal(size=(n, 3, 3)),
               rng.integers(0, 2**30, (n, 2))]
-    instances = len(fields._upload_kernel._primal.compiled_kernels)
+    instances = len(fields._transfer_kernel._primal.compiled_kernels)
     upload(list(zip(ours, values)))
     # The float group and the integer group: two new instances for these five fields.
-    assert len(fields._upload_kernel._primal.compiled_kernels) == instances + 2
+    assert len(fields._transfer_kernel._primal.compiled_kernels) == instances + 2
     for f, v in zip(theirs, values):
         f.from_numpy(v.astype(f.to_numpy().dtype))
     for a, b in zip(download(ours), theirs):

@@ -19,6 +19,7 @@ and gravity must be as at the detection (else the step detects): ``ContactPipeli
 
 import taichi as ti
 
+from ..fields import download
 from .narrow import (_body_reach, _delassus, measure_body_contact, measure_hair_contact, store_entry_coefficients,
                      store_push)
 from .warm import duals_of_impulses
@@ -83,34 +84,13 @@ def reuse_key(pl, dt: float, gravity, dynamic: bool):
     cfg, cs = pl.config, pl.colliders
     if dynamic or cfg.redetect_share <= 0.0 or pl.pair_rounds_last > 1:
         return None
-    fp = np.float64 if ti.lang.impl.current_cfg().default_fp == ti.f64 else np.float32
-    transforms = np.zeros((2, cs.body_count, 12), fp)  # (begin, end) x body x (R row-major, T)
-    strands = np.zeros((cs.collider_strands.shape[0], 2), np.int32)
-    fixed = np.zeros(pl.model.vertex.vertex_is_fixed.shape[0], np.int32)
-    _key_arrays(cs, pl.model.vertex.vertex_is_fixed, transforms, strands, fixed)
-    if not np.array_equal(transforms[0], transforms[1]):
+    # One launch per element type (fields.download), not six to_numpy kernel instances in the first step.
+    rb, re, tb, te, strands, fixed = download((cs.body_rotation_begin, cs.body_rotation_end, cs.body_translation_begin,
+                                               cs.body_translation_end, cs.collider_strands, pl.model.vertex.vertex_is_fixed))
+    if not (np.array_equal(rb, re) and np.array_equal(tb, te)):
         return None
     return (float(dt), tuple(float(c) for c in gravity), cfg.margin, cfg.mass_splitting, cfg.weight_time, cfg.hair_hair,
-            cfg.keep_rest_overlaps, cfg.max_contacts_per_edge, transforms[0].tobytes(), strands.tobytes(), fixed.tobytes())
-
-
-@ti.kernel
-def _key_arrays(cs: ti.template(), fixed: ti.template(), transforms: ti.types.ndarray(), strands: ti.types.ndarray(),
-                fixed_out: ti.types.ndarray()):
-    """The bodies' begin and end transforms, the colliders' strand ranges and the kinematic flags, to the host in one
-    kernel: six ``to_numpy`` calls were six kernel instances to compile or load in the first step (issue 15, item 5)."""
-    for b in cs.body_rotation_begin:
-        for r, c in ti.static(ti.ndrange(3, 3)):
-            transforms[0, b, 3 * r + c] = cs.body_rotation_begin[b][r, c]
-            transforms[1, b, 3 * r + c] = cs.body_rotation_end[b][r, c]
-        for c in ti.static(range(3)):
-            transforms[0, b, 9 + c] = cs.body_translation_begin[b][c]
-            transforms[1, b, 9 + c] = cs.body_translation_end[b][c]
-    for k in cs.collider_strands:
-        strands[k, 0] = cs.collider_strands[k][0]
-        strands[k, 1] = cs.collider_strands[k][1]
-    for i in fixed:
-        fixed_out[i] = fixed[i]
+            cfg.keep_rest_overlaps, cfg.max_contacts_per_edge, rb.tobytes(), tb.tobytes(), strands.tobytes(), fixed.tobytes())
 
 
 def kept_contacts(pl, x, key) -> bool:
