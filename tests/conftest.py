@@ -88,3 +88,48 @@ def pytest_collection_modifyitems(config, items):
     full = len(items) > 400 and not config.getoption("keyword") and not config.getoption("markexpr")
     if full and slow - seen:
         raise pytest.UsageError(f"tests/slow_tests.txt names tests that do not exist: {sorted(slow - seen)}")
+    _longest_modules_first(items)
+
+
+# --------------------------------------------------------------------------- the order of the modules
+_MODULE_SECONDS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "module_seconds.txt")
+
+
+def _module_seconds() -> dict:
+    """tests/module_seconds.txt: the seconds of each module in a measured run (``benchmarks/probes/module_costs.py``)."""
+    seconds = {}
+    if os.path.exists(_MODULE_SECONDS):
+        with open(_MODULE_SECONDS) as fh:
+            for line in fh:
+                parts = line.split("#", 1)[0].split()
+                if len(parts) == 2:
+                    seconds[parts[0]] = float(parts[1])
+    return seconds
+
+
+def _longest_modules_first(items) -> None:
+    """Order the modules longest first, each module's tests in their own order and together.
+
+    pytest-xdist's ``--dist loadfile`` hands each worker a whole module at a time, in the collection's order (its own
+    reordering, by the number of tests, is switched off in :func:`pytest_configure`).  A module's time is mostly its
+    kernels' compilation, not its count of tests, and a long module taken last left the other worker idle while it
+    ran.  Longest first (the longest processing time rule) ends the two workers close together.  A module missing from
+    tests/module_seconds.txt counts as the median.  Nothing else changes: every module still starts Taichi afresh
+    (``taichi_cpu``) and runs its tests in their written order."""
+    seconds = _module_seconds()
+    median = sorted(seconds.values())[len(seconds) // 2] if seconds else 0.0
+
+    def module(item):
+        return item.nodeid.split("::", 1)[0].split("/")[-1]
+
+    first = {}
+    for k, item in enumerate(items):
+        first.setdefault(module(item), k)
+    order = {name: (-seconds.get(name, median), k) for name, k in first.items()}
+    items.sort(key=lambda item: order[module(item)])  # stable: a module's tests keep their order
+
+
+def pytest_configure(config):
+    # Keep the collection's order (longest modules first, above); pytest-xdist would reorder by the number of tests.
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False

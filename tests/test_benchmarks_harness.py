@@ -126,3 +126,40 @@ def test_no_probe_edits_sys_path():
         if p.name in PENDING and "def main(" not in p.read_text():
             continue
         assert "sys.path" not in p.read_text(), p.name
+
+
+def test_module_costs_sum_each_modules_phases_and_the_suite_starts_the_longest_module_first(tmp_path):
+    """benchmarks/probes/module_costs.py sums setup + call + teardown per module from a --durations=0 report, and
+    conftest's order puts the modules longest first, each module's tests together and in their written order."""
+    spec = importlib.util.spec_from_file_location("module_costs", BENCHMARKS / "probes" / "module_costs.py")
+    costs = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(costs)
+    report = ["12.50s call     tests/test_b.py::test_one",
+              "0.50s setup    tests/test_b.py::test_one",
+              "3.00s call     tests/test_a.py::test_x[1]",
+              "2.00s teardown tests/test_c.py::test_z",
+              "(1 durations < 0.005s hidden.)"]
+    assert costs.module_seconds(report) == {"test_b.py": 13.0, "test_a.py": 3.0, "test_c.py": 2.0}
+
+    sys.path.insert(0, str(pathlib.Path(__file__).parent))
+    try:
+        import conftest
+    finally:
+        sys.path.pop(0)
+
+    class Item:
+        def __init__(self, nodeid):
+            self.nodeid = nodeid
+
+    ids = ["tests/test_a.py::t1", "tests/test_a.py::t2", "tests/test_b.py::t1", "tests/test_new.py::t1",
+           "tests/test_c.py::t1", "tests/test_c.py::t2"]
+    items = [Item(i) for i in ids]
+    conftest._MODULE_SECONDS, kept = str(tmp_path / "seconds.txt"), conftest._MODULE_SECONDS
+    try:
+        (tmp_path / "seconds.txt").write_text("# a comment\ntest_a.py 3\ntest_b.py 13\ntest_c.py 2\n")
+        conftest._longest_modules_first(items)
+    finally:
+        conftest._MODULE_SECONDS = kept
+    # b (13 s), a (3 s), then test_new.py (absent: the median, 3 s, after a by first appearance), c (2 s).
+    assert [i.nodeid for i in items] == ["tests/test_b.py::t1", "tests/test_a.py::t1", "tests/test_a.py::t2",
+                                        "tests/test_new.py::t1", "tests/test_c.py::t1", "tests/test_c.py::t2"]
