@@ -39,7 +39,8 @@ def main(argv=None) -> int:
         raise SystemExit(f"{a.durations}: no '--durations=0' lines found")
     print("# Seconds of each test module (setup + call + teardown, compilation included), longest first; written by")
     print("# benchmarks/probes/module_costs.py from a run of the whole suite with --durations=0.  tests/conftest.py")
-    print(f"# starts the longest modules first.  Total {sum(seconds.values()):.0f} s, median {statistics.median(seconds.values()):.0f} s.")
+    total, median = sum(seconds.values()), statistics.median(seconds.values())
+    print(f"# starts the longest modules first.  Total {total:.0f} s, median {median:.0f} s.")
     for name, s in sorted(seconds.items(), key=lambda kv: -kv[1]):
         print(f"{name} {s:.0f}")
     return 0
