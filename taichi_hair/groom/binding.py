@@ -193,10 +193,15 @@ def vertex_rows(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
 
 
-def _rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Rows of two (V, 3) arrays that differ in any coordinate, (V,) bool: ``np.any(a != b, axis=1)``, column by
-    column (30.8 -> 8 ms on 1.2 M rows: NumPy reduces along a short last axis slowly)."""
-    return (a[:, 0] != b[:, 0]) | (a[:, 1] != b[:, 1]) | (a[:, 2] != b[:, 2])
+def _strands_differ(a: np.ndarray, b: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Strands of two (V, 3) arrays (the same layout, strand s from row ``starts[s]``, every strand at least one row)
+    with any coordinate different, (S,) bool: ``np.any(a != b)`` over each strand's rows.  One comparison of the flat
+    arrays and one ``reduceat`` over the strands' first coordinates: on the 86,000-strand groom's 1.2 M rows 6.6-7.0 ms
+    against 17-19 ms for a comparison per column and a reduction per row (NumPy reduces along a short last axis
+    slowly), the same result (scratch probe 2026-12-07)."""
+    if not starts.size:
+        return np.zeros(0, bool)
+    return np.logical_or.reduceat((a != b).reshape(-1), 3 * np.asarray(starts, np.int64))
 
 
 def _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame):
@@ -210,8 +215,8 @@ def _strands_to_rebind(previous, P, X, counts, starts, gstart, gcount, K, frame)
         return None
     if not (np.array_equal(P0[starts], P[starts]) and np.array_equal(X0[gstart], X[gstart])):
         return None  # a root moved: the nearest guides and the weights change
-    moved_r = np.logical_or.reduceat(_rows_differ(P0, P), starts)
-    moved_g = np.logical_or.reduceat(_rows_differ(X0, X), gstart) if gstart.size else np.zeros(0, bool)
+    moved_r = _strands_differ(P0, P, starts)
+    moved_g = _strands_differ(X0, X, gstart)
     moved = moved_r | np.any(moved_g[previous["render_strand_guides"]], axis=1)
     return np.nonzero(moved)[0]
 

@@ -129,11 +129,10 @@ def guide_host(guide_rest, material, old=None) -> tuple[dict, list, np.ndarray |
     points, offsets = guide_rest
     counts = np.diff(offsets)
     if old is not None and old[1] == material and np.array_equal(old[0]["strand_vertex_count"], counts):
-        from .binding import _rows_differ, vertex_rows
+        from .binding import _strands_differ, vertex_rows
 
         prev = old[0]
-        changed = np.nonzero(np.logical_or.reduceat(_rows_differ(prev["vertex_rest_position"], points),
-                                                    offsets[:-1]))[0] if counts.size else np.zeros(0, np.int64)
+        changed = np.nonzero(_strands_differ(prev["vertex_rest_position"], points, offsets[:-1]))[0]
         if changed.size <= counts.size // 2:
             rows = vertex_rows(offsets[changed], counts[changed])
             host = dict(prev)
