@@ -285,7 +285,11 @@ def _bind_kernel(P: _F64_2, first: _I64_1, counts: _I64_1, strand_ids: _I64_1, n
                     cum += (_row3(P, s0 + q) - _row3(P, s0 + q - 1)).norm()
                 s = cum / length
                 p = _row3(P, s0 + q)
-                while lo < gs + gc and f_g[lo] <= s:
+                # (Not `while lo < gs + gc and f_g[lo] <= s`: Taichi's `and` evaluates both sides, which would read
+                # one past the last guide's fractions.)
+                while lo < gs + gc:
+                    if f_g[lo] > s:
+                        break
                     lo += 1
                 j = ti.min(ti.max(lo - 1, gs), gs + gc - 2)
                 u = ti.min(ti.max((s - f_g[j]) / (f_g[j + 1] - f_g[j]), 0.0), 1.0)
