@@ -294,6 +294,63 @@ def test_undo_redo_restore_bit_for_bit():
         s.redo()
 
 
+def test_differing_rows_compares_bits_so_minus_zero_differs_and_a_nan_equals_itself():
+    # Claim: history._differing_rows returns exactly the rows whose bytes differ (the reference: a row's tobytes()),
+    # for float64 (n, 3), float32 (n,), bool (n,) and int rows of odd byte width; -0.0 vs 0.0 is a change, an
+    # unchanged NaN is not.  Exact (no tolerance): a restore from these rows must give the same bits.
+    from taichi_hair.groom.history import _differing_rows
+
+    rng = np.random.default_rng(11)
+    for a in (rng.normal(size=(50, 3)), rng.normal(size=50).astype(np.float32), rng.random(50) < 0.5,
+              rng.integers(0, 9, size=(50, 3)).astype(np.int8)):
+        b = a.copy()
+        for r in (0, 7, 8, 49):
+            b[r] = ~b[r] if b.dtype == bool else b[r] + 1
+        if a.dtype == np.float64:
+            a[20], b[20] = 0.0, -0.0
+            a[30, 1] = b[30, 1] = np.nan
+        want = [r for r in range(len(a)) if a[r].tobytes() != b[r].tobytes()]
+        assert _differing_rows(a, b).tolist() == want, a.dtype
+    assert _differing_rows(np.zeros((4, 3)), np.zeros((4, 3))).size == 0
+
+
+def test_undo_history_below_each_top_keeps_only_the_changed_rows_and_restores_every_step_bit_for_bit():
+    # Claim: after many edits, undo and redo through the history give the same bits as whole snapshots (kept here
+    # as copies), and each snapshot below a stack's top stores only the rows its edit changed (an edit of 2 of 12
+    # strands: at most 2 x 10 rows per array), so memory grows with what an edit changes, not with the groom.
+    from taichi_hair.groom.history import _Rows
+
+    s = session()
+    states = [s.groom.copy()]
+    for k in range(6):
+        s.select_strands([k, k + 6])
+        s.scale_length(1.2 if k % 2 == 0 else 0.8)
+        states.append(s.groom.copy())
+    below = s.history.undo_stack[:-1]
+    assert len(below) == 5 and all(snap["groom"] is None for snap in below)
+    off = s.groom.strand_offsets
+    for k, snap in enumerate(below):  # snapshot k: before edit k, stored against the state after it
+        edited = set(range(off[k], off[k + 1])) | set(range(off[k + 6], off[k + 7]))
+        for name in ("points", "rest_points"):
+            part = snap["groom_delta"][2][name]
+            assert isinstance(part, _Rows) and set(part.rows.tolist()) <= edited, (k, name)
+            assert part.rows.size >= 2 * (NV - 1)  # every vertex but the roots (kept bit for bit) moved
+
+    def same_bits(a, b):
+        return all(getattr(a, f).tobytes() == getattr(b, f).tobytes() and getattr(a, f).dtype == getattr(b, f).dtype
+                   for f in ("points", "rest_points", "pinned", "strand_offsets"))
+
+    for k in range(len(states) - 2, 2, -1):  # back three edits
+        s.undo()
+        assert same_bits(s.groom, states[k])
+    for k in range(4, len(states)):  # forward again
+        s.redo()
+        assert same_bits(s.groom, states[k])
+    for k in range(len(states) - 2, -1, -1):  # and all the way back
+        s.undo()
+        assert same_bits(s.groom, states[k])
+
+
 def test_the_session_groom_is_read_only_so_undo_snapshots_can_share_its_arrays():
     """Undo snapshots share the groom's arrays instead of copying them (history.shared_copy): that is sound only
     if nothing writes into them, so they are read-only, and a write raises; an edit makes new arrays and leaves

@@ -80,8 +80,93 @@ def what_changed(old_groom, old_config, groom, config) -> tuple[bool, bool]:
     return same_layout, same_rest
 
 
+class _Rows:
+    """The rows of a snapshot's array that differ from its newer neighbour's (:func:`compress`): ``rows`` (k,) int64
+    and their ``values`` (k, ...), the other rows being the neighbour's."""
+
+    __slots__ = ("rows", "values")
+
+    def __init__(self, rows: np.ndarray, values: np.ndarray):
+        self.rows, self.values = rows, values
+
+
+_SAME = object()  # a snapshot's array that is the newer neighbour's own array (shared, nothing stored)
+
+
+def _differing_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Indices of the rows (axis 0) of a and b, same shape and dtype, whose bits differ (so -0.0 against 0.0 differs,
+    and a NaN equals itself): the exact test a bit-for-bit restore needs.  One flat comparison in the widest unsigned
+    words the row width allows, then the differing words' rows (1.2 M rows x 3 float64 with 10 % changed: 11 ms,
+    against 36 ms for a per-row ``any``)."""
+    n = a.shape[0]
+    ua = np.ascontiguousarray(a).view(np.uint8).reshape(n, -1)
+    ub = np.ascontiguousarray(b).view(np.uint8).reshape(n, -1)
+    width = ua.shape[1]
+    for k in (8, 4, 2):
+        if width % k == 0:
+            ua, ub, width = ua.view(f"u{k}"), ub.view(f"u{k}"), width // k
+            break
+    rows = np.flatnonzero(ua.reshape(-1) != ub.reshape(-1)) // width  # non-decreasing
+    if rows.size < 2:
+        return rows
+    first = np.empty(rows.size, dtype=bool)
+    first[0] = True
+    np.not_equal(rows[1:], rows[:-1], out=first[1:])
+    return rows[first]
+
+
+def compress(snap: dict, newer) -> None:
+    """Store ``snap``'s groom, in place, as the rows of each array that differ from ``newer`` (the groom of the state
+    right after it in time): an edit of 8,600 of 86,000 strands then keeps ~6 MB instead of two whole poses (57 MB
+    at float64).  An array shared with ``newer`` is stored as a reference, one with more than half its rows changed
+    (a simulated frame moves every vertex), of another shape or dtype stays whole.  :func:`expand` undoes it."""
+    g = snap.get("groom")
+    if g is None or newer is None:
+        return
+    parts, kept = {}, {}
+    for f in fields(g):
+        v, w = getattr(g, f.name), getattr(newer, f.name)
+        kept[f.name] = v
+        if not isinstance(v, np.ndarray) or not isinstance(w, np.ndarray):
+            continue
+        if v is w:
+            parts[f.name] = _SAME
+        elif v.shape == w.shape and v.dtype == w.dtype and v.ndim >= 1 and v.shape[0] > 0 and v.dtype != object:
+            rows = _differing_rows(v, w)
+            if 2 * rows.size <= v.shape[0]:
+                parts[f.name] = _Rows(rows, v[rows])
+    if parts:
+        for name in parts:
+            del kept[name]
+        snap["groom"] = None
+        snap["groom_delta"] = (type(g), kept, parts)
+
+
+def expand(snap: dict, newer) -> None:
+    """The whole groom of a :func:`compress`-ed ``snap`` again (read-only arrays), from ``newer``, the groom it was
+    compressed against; nothing for a whole snapshot."""
+    if snap.get("groom") is not None or "groom_delta" not in snap:
+        return
+    cls, kept, parts = snap.pop("groom_delta")
+    values = dict(kept)
+    for name, part in parts.items():
+        w = getattr(newer, name)
+        if part is _SAME:
+            values[name] = w
+        else:
+            v = w.copy()
+            v[part.rows] = part.values
+            values[name] = v
+    snap["groom"] = frozen(cls(**values))
+
+
 class History:
     """Undo and redo stacks of snapshots (dicts of :func:`snapshot`).
+
+    Only the snapshot on top of each stack holds its groom whole; each one below it holds the rows that differ
+    from the snapshot above it (:func:`compress`), and is made whole again when it comes to the top
+    (:func:`expand`).  The two tops are the states next to the current one, so every step of undo or redo
+    restores the same bits as whole snapshots would (``tests/test_grooming.py``).
 
     Attributes:
         undo_stack: snapshots taken before each edit, oldest first.
@@ -92,9 +177,22 @@ class History:
         self.undo_stack: list[dict] = []
         self.redo_stack: list[dict] = []
 
+    @staticmethod
+    def _put(stack: list, snap: dict) -> None:
+        if stack:
+            compress(stack[-1], snap["groom"])
+        stack.append(snap)
+
+    @staticmethod
+    def _take(stack: list) -> dict:
+        snap = stack.pop()
+        if stack:
+            expand(stack[-1], snap["groom"])
+        return snap
+
     def push(self, snap: dict, limit: int) -> None:
         """Record the state before a new edit (at most ``limit`` kept, the oldest dropped); clears redo."""
-        self.undo_stack.append(snap)
+        self._put(self.undo_stack, snap)
         if len(self.undo_stack) > limit:
             del self.undo_stack[: len(self.undo_stack) - limit]
         self.redo_stack.clear()
@@ -103,15 +201,15 @@ class History:
         """The snapshot to restore for an undo; ``current`` (the state now) goes on the redo stack."""
         if not self.undo_stack:
             raise ValueError("undo: nothing to undo")
-        self.redo_stack.append(current)
-        return self.undo_stack.pop()
+        self._put(self.redo_stack, current)
+        return self._take(self.undo_stack)
 
     def redo(self, current: dict) -> dict:
         """The snapshot to restore for a redo; ``current`` goes back on the undo stack."""
         if not self.redo_stack:
             raise ValueError("redo: nothing to redo")
-        self.undo_stack.append(current)
-        return self.redo_stack.pop()
+        self._put(self.undo_stack, current)
+        return self._take(self.redo_stack)
 
     @property
     def can_undo(self) -> bool:
