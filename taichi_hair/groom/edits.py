@@ -344,13 +344,17 @@ def _batch_resample(cur: np.ndarray, rest: np.ndarray, n_valid: np.ndarray, s: n
     knots_valid = np.where(cols[None, :] < n_valid[:, None], knots, np.inf)
     j = np.count_nonzero(knots_valid[:, None, :] <= s[:, :, None], axis=2) - 1
     j = np.clip(j, 0, (n_valid - 2)[:, None])
-    k0 = np.take_along_axis(knots, j, axis=1)
-    k1 = np.take_along_axis(knots, j + 1, axis=1)
+    # Flat row indices instead of np.take_along_axis, which indexes every axis (the same values; 8,600 strands: the
+    # six gathers 22 -> ~6 ms).
+    flat = j + (np.arange(j.shape[0]) * knots.shape[1])[:, None]
+    k0 = knots.reshape(-1)[flat]
+    k1 = knots.reshape(-1)[flat + 1]
     u = np.clip((s - k0) / (k1 - k0), 0.0, 1.0)[:, :, None]
 
     def sample(p):
-        p0 = np.take_along_axis(p, j[:, :, None], axis=1)
-        p1 = np.take_along_axis(p, j[:, :, None] + 1, axis=1)
+        rows = p.reshape(-1, 3)
+        p0 = rows[flat]
+        p1 = rows[flat + 1]
         return p0 + u * (p1 - p0)
 
     new_cur, new_rest = sample(cur), sample(rest)
