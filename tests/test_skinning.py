@@ -348,13 +348,20 @@ def test_rebinding_after_an_edit_redoes_only_the_changed_strands_and_equals_a_fu
         assert np.array_equal(inc[key], full[key]), key
     # Which strands were bound again: the two edited ones and those bound to the edited guide, no others.
     counts = full["render_strand_vertex_count"]
-    redo = _strands_to_rebind(h0, full["render_vertex_rest_position"], full["guide_vertex_rest_position"], counts,
-                              full["render_strand_vertex_start"], model2.host["strand_vertex_start"].astype(np.int64),
-                              model2.host["strand_vertex_count"].astype(np.int64), full["render_strand_guides"].shape[1],
-                              "transport")
+    redo, slots = _strands_to_rebind(h0, full["render_vertex_rest_position"], full["guide_vertex_rest_position"],
+                                     counts, full["render_strand_vertex_start"],
+                                     model2.host["strand_vertex_start"].astype(np.int64),
+                                     model2.host["strand_vertex_count"].astype(np.int64),
+                                     full["render_strand_guides"].shape[1], "transport")
     g_index = int(np.nonzero(guides == g_edit)[0][0])
     expected = {g_edit, s_edit} | set(np.nonzero(np.any(full["render_strand_guides"] == g_index, axis=1))[0].tolist())
     assert set(redo.tolist()) == expected and len(expected) < len(strands) // 2, (sorted(redo), sorted(expected))
+    # Which slots: all of the two edited strands; of the others, only the slot bound to the edited guide.
+    for row, s_ in enumerate(redo.tolist()):
+        want = (np.ones(slots.shape[1], bool) if s_ in (g_edit, s_edit)
+                else full["render_strand_guides"][s_] == g_index)
+        assert np.array_equal(slots[row], want), (s_, slots[row], want)
+    assert slots.sum() < slots.size  # some slots were left as they were (and the arrays above still equal a full binding)
     assert not np.array_equal(inc["render_vertex_bind_local"], h0["render_vertex_bind_local"])  # the edit shows
     moved = [p.copy() for p in edited]
     moved[s_edit] = moved[s_edit] + np.array([0.0, 0.0, 1e-3])  # a root moves: the neighbours may change
