@@ -315,6 +315,18 @@ class SkinningLBS:
                              "differ from the bound ones; build a new SkinningLBS")
         self._upload(h, rebound[0])
 
+    def prepare_rebind(self) -> None:
+        """Launch the partial upload of :meth:`rebind` once on no rows, so that its machine code is made now and not
+        in the first edit (Taichi's offline cache keeps kernels as LLVM IR: a process's first launch of each one
+        compiles it to machine code).  The grooming session calls it at its build; a run that never edits has no
+        need of it."""
+        h = self.host
+        upload_binding_rows(self.fields, np.zeros(0, np.int64),
+                            np.ascontiguousarray(h["render_vertex_rest_position"], np.float64),
+                            np.ascontiguousarray(h["render_vertex_bind_edge"], np.int64),
+                            np.ascontiguousarray(h["render_vertex_bind_param"], np.float64),
+                            np.ascontiguousarray(h["render_vertex_bind_local"], np.float64))
+
     def deform(self, guide_state: State, control: Control) -> None:
         """Skin the render strands to ``guide_state`` (positions, and frames for
         ``frame="material"``) with the body transforms of ``control``.  Result in
