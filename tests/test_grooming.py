@@ -351,6 +351,36 @@ def test_undo_history_below_each_top_keeps_only_the_changed_rows_and_restores_ev
         assert same_bits(s.groom, states[k])
 
 
+def test_undo_memory_budget_drops_the_oldest_snapshots_and_counts_the_bytes_each_one_holds():
+    # Claim: a snapshot's counted bytes are exactly what it holds apart from its newer neighbour (its changed rows and
+    # their indices, its selection); with GroomingConfig.undo_memory_mb the oldest snapshots beyond the budget are
+    # dropped (the newest always kept), and 0 keeps all.  Exact byte counts, no tolerance.
+    from taichi_hair.groom.history import _Rows
+
+    def edits(s, n):
+        for k in range(n):
+            s.select_strands([k % NS])
+            s.scale_length(1.2 if k % 2 == 0 else 0.8)
+
+    s = session(undo_memory_mb=0.0)
+    edits(s, 6)
+    assert len(s.history.undo_stack) == 6
+    for snap in s.history.undo_stack[:-1]:
+        parts = snap["groom_delta"][2]
+        held = sum(p.rows.nbytes + p.values.nbytes for p in parts.values() if isinstance(p, _Rows))
+        assert snap["bytes"] == held + snap["selection"].nbytes
+    one = max(snap["bytes"] for snap in s.history.undo_stack[:-1])
+    s2 = session(undo_memory_mb=2.5 * one / 2**20)  # room for two snapshots below the newest
+    edits(s2, 6)
+    assert len(s2.history.undo_stack) == 3 and s2.history.bytes_held() <= 2.5 * one
+    for _ in range(3):
+        s2.undo()
+    with pytest.raises(ValueError, match="nothing to undo"):
+        s2.undo()
+    with pytest.raises(ValueError, match="undo_memory_mb"):
+        session(undo_memory_mb=-1.0)
+
+
 def test_the_session_groom_is_read_only_so_undo_snapshots_can_share_its_arrays():
     """Undo snapshots share the groom's arrays instead of copying them (history.shared_copy): that is sound only
     if nothing writes into them, so they are read-only, and a write raises; an edit makes new arrays and leaves

@@ -2,11 +2,14 @@
 
 Run from the repository root (``PYTHONPATH=OTHER_CHECKOUT`` measures another commit's library with this probe)::
 
-    python3 benchmarks/probes/groom_edit_memory.py [--strands 86000] [--edits 30] [--undo-limit 100] [--json OUT]
+    python3 benchmarks/probes/groom_edit_memory.py [--strands 86000] [--edits 30] [--undo-limit 100] [--advance N]
+        [--json OUT]
 
-Builds the grooming benchmark's groom (``bench_groom.py``'s wavy groom, 14 vertices per strand) in a session without
-a simulation (host edits only: the history's cost, not the update's), selects every 10th strand and makes ``--edits``
-``scale_length`` edits (by 1.1 and back, alternately), each kept in the undo history (``--undo-limit``).  Prints the
+Builds the grooming benchmark's groom (``bench_groom.py``'s wavy groom, 14 vertices per strand) in a session, selects
+every 10th strand and makes ``--edits`` ``scale_length`` edits (by 1.1 and back, alternately), each kept in the undo
+history (``--undo-limit``).  Without ``--advance`` the session has no simulation (host edits only: the history's cost,
+not the update's); with ``--advance N`` the live workflow: the simulation (hair-hair contacts) runs N frames after each
+edit, so the groom's current pose changes everywhere between two snapshots.  Prints the
 process's resident memory every 5 edits and each edit's host seconds; then undoes every edit and checks that the
 groom is the first one again, bit for bit.  As the command line and the grooming app, glibc keeps freed memory
 (``keep_freed_memory``).
@@ -28,6 +31,7 @@ def main(argv=None) -> int:
     ap.add_argument("--strands", type=int, default=86000)
     ap.add_argument("--edits", type=int, default=30)
     ap.add_argument("--undo-limit", type=int, default=100)
+    ap.add_argument("--advance", type=int, default=0, help="simulated frames after each edit (0: no simulation)")
     ap.add_argument("--json", default=None, help="write the figures to this file")
     a = ap.parse_args(argv)
     import numpy as np
@@ -45,17 +49,21 @@ def main(argv=None) -> int:
 
     groom = generate_groom(load_head(), GeneratorConfig(style="wavy", strands=a.strands, vertices_per_strand=14,
                                                         length=0.25, seed=0))
-    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=False, autosave_every=0,
-                                                    rest_pose="authored", undo_limit=a.undo_limit))
+    session = GroomingSession(groom, GroomingConfig(iterations=10, guide_ratio=0.1, contacts=a.advance > 0,
+                                                    autosave_every=0, rest_pose="authored", undo_limit=a.undo_limit))
+    if a.advance:
+        session.advance(1)  # the build and a first frame before the measurement
     first = (session.groom.points.tobytes(), session.groom.rest_points.tobytes())
     session.select_strands(np.arange(0, groom.strand_count, 10))
-    res = {"strands": a.strands, "edits": a.edits, "undo_limit": a.undo_limit, "load_average": list(os.getloadavg()),
+    res = {"strands": a.strands, "edits": a.edits, "undo_limit": a.undo_limit, "advance": a.advance, "load_average": list(os.getloadavg()),
            "rss_mb_before": _rss_mb(), "rss_mb": {}, "edit_ms": []}
     print(f"before the edits: {res['rss_mb_before']:.0f} MB resident")
     for k in range(a.edits):
         t = time.perf_counter()
         session.scale_length(1.1 if k % 2 == 0 else 1 / 1.1)
         res["edit_ms"].append(1e3 * (time.perf_counter() - t))
+        if a.advance:
+            session.advance(a.advance)
         if (k + 1) % 5 == 0 or k + 1 == a.edits:
             res["rss_mb"][k + 1] = _rss_mb()
             print(f"{k + 1:4d} edits: {res['rss_mb'][k + 1]:7.0f} MB resident, the last 5 edits "

@@ -98,6 +98,11 @@ class GroomingConfig:
             ``"lanes"``; other speed).
         autosave_every: write the autosave files every this many edits; 0 disables [-].
         undo_limit: most undo snapshots kept [-].
+        undo_memory_mb: most memory the undo snapshots below the newest one may hold [MiB]; the oldest beyond it are
+            dropped (the newest snapshot, a whole groom, is always kept).  0: no limit.  Each snapshot holds the rows
+            its edit changed, and the whole current pose when the simulation moved it since the snapshot before
+            (86,000 strands at float64: ~8 MB per edit without simulation, ~32-37 MB with a frame between edits;
+            ``benchmarks/probes/groom_edit_memory.py``), so the default keeps ~30 live edits of such a groom.
     """
 
     youngs_modulus: float = 3.0e9
@@ -120,6 +125,7 @@ class GroomingConfig:
     schedule: str = "auto"
     autosave_every: int = 1
     undo_limit: int = 100
+    undo_memory_mb: float = 1024.0
 
     def __post_init__(self):
         for name in ("youngs_modulus", "radius", "density", "w0", "rest_max_change"):
@@ -127,7 +133,7 @@ class GroomingConfig:
             if not (_finite(v) and v > 0):
                 raise ValueError(f"GroomingConfig.{name} must be a finite positive number, got {v!r}")
             setattr(self, name, float(v))
-        for name in ("friction", "contact_margin", "unheld_shape_weight"):
+        for name in ("friction", "contact_margin", "unheld_shape_weight", "undo_memory_mb"):
             v = getattr(self, name)
             if not (_finite(v) and v >= 0):
                 raise ValueError(f"GroomingConfig.{name} must be a finite number >= 0, got {v!r}")

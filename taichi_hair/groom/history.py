@@ -124,17 +124,24 @@ def compress(snap: dict, newer) -> None:
     if g is None or newer is None:
         return
     parts, kept = {}, {}
+    own = snap["selection"].nbytes  # what this snapshot holds that its newer neighbour does not share
     for f in fields(g):
         v, w = getattr(g, f.name), getattr(newer, f.name)
         kept[f.name] = v
-        if not isinstance(v, np.ndarray) or not isinstance(w, np.ndarray):
+        if not isinstance(v, np.ndarray):
             continue
         if v is w:
             parts[f.name] = _SAME
-        elif v.shape == w.shape and v.dtype == w.dtype and v.ndim >= 1 and v.shape[0] > 0 and v.dtype != object:
+            continue
+        if (isinstance(w, np.ndarray) and v.shape == w.shape and v.dtype == w.dtype and v.ndim >= 1 and v.shape[0] > 0
+                and v.dtype != object):
             rows = _differing_rows(v, w)
             if 2 * rows.size <= v.shape[0]:
                 parts[f.name] = _Rows(rows, v[rows])
+                own += rows.nbytes + parts[f.name].values.nbytes
+                continue
+        own += v.nbytes
+    snap["bytes"] = own
     if parts:
         for name in parts:
             del kept[name]
@@ -190,12 +197,23 @@ class History:
             expand(stack[-1], snap["groom"])
         return snap
 
-    def push(self, snap: dict, limit: int) -> None:
-        """Record the state before a new edit (at most ``limit`` kept, the oldest dropped); clears redo."""
+    def push(self, snap: dict, limit: int, max_bytes: float = 0.0) -> None:
+        """Record the state before a new edit; clears redo.  At most ``limit`` snapshots are kept, and with
+        ``max_bytes`` > 0 the snapshots below the newest hold at most that many bytes (``snap["bytes"]``, set by
+        :func:`compress`): the oldest beyond either are dropped."""
         self._put(self.undo_stack, snap)
-        if len(self.undo_stack) > limit:
-            del self.undo_stack[: len(self.undo_stack) - limit]
+        drop = max(0, len(self.undo_stack) - limit)
+        if max_bytes > 0:
+            held = sum(s.get("bytes", 0) for s in self.undo_stack[drop:-1])
+            while drop < len(self.undo_stack) - 1 and held > max_bytes:
+                held -= self.undo_stack[drop].get("bytes", 0)
+                drop += 1
+        del self.undo_stack[:drop]
         self.redo_stack.clear()
+
+    def bytes_held(self) -> int:
+        """Bytes the compressed snapshots of both stacks hold (the two whole ones on top not counted)."""
+        return sum(s.get("bytes", 0) for s in self.undo_stack[:-1] + self.redo_stack[:-1])
 
     def undo(self, current: dict) -> dict:
         """The snapshot to restore for an undo; ``current`` (the state now) goes on the redo stack."""

@@ -165,7 +165,7 @@ class GroomingSession:
         """Run ``apply`` (which validates before it changes anything) as one undoable, logged edit."""
         snap = self._snapshot()
         apply()
-        self.history.push(snap, self.config.undo_limit)
+        self.history.push(snap, self.config.undo_limit, self.config.undo_memory_mb * 2**20)
         self._record(action, **params)
         self._count_edit()
 

@@ -157,7 +157,8 @@ def make_variants(groom, config: VariantConfig, grooming_config=None, out_dir=".
     os.makedirs(out_dir, exist_ok=True)
     cfg = grooming_config or GroomingConfig()
     # Every edit of a variant must stay undoable to get back to the base (a force is frames + 2 edits).
-    cfg = replace(cfg, undo_limit=max(cfg.undo_limit, config.actions * (config.frames + 2) + 1), autosave_every=0)
+    cfg = replace(cfg, undo_limit=max(cfg.undo_limit, config.actions * (config.frames + 2) + 1), undo_memory_mb=0.0,
+                  autosave_every=0)  # (every variant is undone back to the base groom: no snapshot may be dropped)
     session = GroomingSession(groom, cfg, colliders=colliders)
     w, h = config.thumbnail
     viewer = ViewerGGUI(w, h, show_window=False)
