@@ -10,7 +10,8 @@ every 10th strand and makes ``--edits`` ``scale_length`` edits (by 1.1 and back,
 history (``--undo-limit``).  Without ``--advance`` the session has no simulation (host edits only: the history's cost,
 not the update's); with ``--advance N`` the live workflow: the simulation (hair-hair contacts) runs N frames after each
 edit, so the groom's current pose changes everywhere between two snapshots.  Prints the
-process's resident memory every 5 edits and each edit's host seconds; then undoes every edit and checks that the
+process's resident memory every 5 edits and each edit's host seconds, and the snapshots the history kept
+(``GroomingConfig.undo_limit`` and ``undo_memory_mb``); then undoes every edit and, if all were kept, checks that the
 groom is the first one again, bit for bit.  As the command line and the grooming app, glibc keeps freed memory
 (``keep_freed_memory``).
 """
@@ -55,7 +56,8 @@ def main(argv=None) -> int:
         session.advance(1)  # the build and a first frame before the measurement
     first = (session.groom.points.tobytes(), session.groom.rest_points.tobytes())
     session.select_strands(np.arange(0, groom.strand_count, 10))
-    res = {"strands": a.strands, "edits": a.edits, "undo_limit": a.undo_limit, "advance": a.advance, "load_average": list(os.getloadavg()),
+    res = {"strands": a.strands, "edits": a.edits, "undo_limit": a.undo_limit, "advance": a.advance,
+           "load_average": list(os.getloadavg()),
            "rss_mb_before": _rss_mb(), "rss_mb": {}, "edit_ms": []}
     print(f"before the edits: {res['rss_mb_before']:.0f} MB resident")
     for k in range(a.edits):
@@ -68,10 +70,12 @@ def main(argv=None) -> int:
             res["rss_mb"][k + 1] = _rss_mb()
             print(f"{k + 1:4d} edits: {res['rss_mb'][k + 1]:7.0f} MB resident, the last 5 edits "
                   f"{[round(x) for x in res['edit_ms'][-5:]]} ms")
+    kept = len(session.history.undo_stack)  # (undo_limit and GroomingConfig.undo_memory_mb may have dropped some)
+    res["snapshots_kept"], res["history_bytes"] = kept, session.history.bytes_held()
+    print(f"undo snapshots kept: {kept} of {a.edits}, {res['history_bytes'] / 2**20:.0f} MiB below the newest")
     while session.can_undo:
         session.undo()
     same = first == (session.groom.points.tobytes(), session.groom.rest_points.tobytes())
-    kept = min(a.edits, a.undo_limit)
     res["undone_to_first_bit_for_bit"] = same if kept == a.edits else None
     grow = (res["rss_mb"][a.edits] - res["rss_mb_before"]) / a.edits
     res["mb_per_edit"] = grow
