@@ -117,9 +117,11 @@ def _differing_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def compress(snap: dict, newer) -> None:
     """Store ``snap``'s groom, in place, as the rows of each array that differ from ``newer`` (the groom of the state
-    right after it in time): an edit of 8,600 of 86,000 strands then keeps ~6 MB instead of two whole poses (57 MB
-    at float64).  An array shared with ``newer`` is stored as a reference, one with more than half its rows changed
-    (a simulated frame moves every vertex), of another shape or dtype stays whole.  :func:`expand` undoes it."""
+    right after it in time): an edit of 8,600 of 86,000 strands then keeps ~8-12 MB instead of two whole poses
+    (57 MB at float64; ``benchmarks/probes/groom_edit_memory.py``).  Sets ``snap["bytes"]``, what the snapshot holds
+    that ``newer`` does not share (for ``GroomingConfig.undo_memory_mb``).  An array shared with ``newer`` is stored
+    as a reference; one with more than half its rows changed (a simulated frame moves every vertex), or of another
+    shape or dtype, stays whole.  :func:`expand` undoes it."""
     g = snap.get("groom")
     if g is None or newer is None:
         return
