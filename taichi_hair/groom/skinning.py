@@ -286,11 +286,7 @@ class SkinningLBS:
 
             rows = vertex_rows(h["render_strand_vertex_start"][strands], h["render_strand_vertex_count"][strands])
             if rows.size:
-                upload_binding_rows(self.fields, np.ascontiguousarray(rows, np.int64),
-                                    np.ascontiguousarray(h["render_vertex_rest_position"], np.float64),
-                                    np.ascontiguousarray(h["render_vertex_bind_edge"], np.int64),
-                                    np.ascontiguousarray(h["render_vertex_bind_param"], np.float64),
-                                    np.ascontiguousarray(h["render_vertex_bind_local"], np.float64))
+                self._upload_rows(rows)
             return
         upload_binding(self.fields, np.ascontiguousarray(h["render_vertex_rest_position"], np.float64),
                        np.ascontiguousarray(h["render_vertex_body"], np.int32),
@@ -320,8 +316,12 @@ class SkinningLBS:
         in the first edit (Taichi's offline cache keeps kernels as LLVM IR: a process's first launch of each one
         compiles it to machine code).  The grooming session calls it at its build; a run that never edits has no
         need of it."""
+        self._upload_rows(np.zeros(0, np.int64))
+
+    def _upload_rows(self, rows: np.ndarray) -> None:
+        """``upload_binding_rows`` of the render vertices ``rows`` (int64) from ``self.host``."""
         h = self.host
-        upload_binding_rows(self.fields, np.zeros(0, np.int64),
+        upload_binding_rows(self.fields, np.ascontiguousarray(rows, np.int64),
                             np.ascontiguousarray(h["render_vertex_rest_position"], np.float64),
                             np.ascontiguousarray(h["render_vertex_bind_edge"], np.int64),
                             np.ascontiguousarray(h["render_vertex_bind_param"], np.float64),
